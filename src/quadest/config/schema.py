@@ -1,0 +1,144 @@
+"""Structured-config schemas: every config node has a dataclass, so that a misspelled key or a
+value of the wrong type fails when Hydra composes the config, before any work starts.
+
+The tree mirrors the package: ``model/`` (:mod:`quadest.models`), ``sensor/``
+(:mod:`quadest.sensors`), ``scenario/`` (:mod:`quadest.quadrotor.scenarios`), ``estimator/``
+(:mod:`quadest.estimators`). Each YAML option pulls its schema from ``/schema/<group>/<name>``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+from quadest.quadrotor.scenarios import SCENARIOS
+
+
+@dataclass
+class ProcessNoiseConf:
+    """One-sigma process noise per sample period, per state group (see docs/filter-models.md)."""
+
+    velocity: float = 0.01
+    angle: float = 1.0e-4
+    angle_rate: float = 0.05
+
+
+@dataclass
+class InitialStdConf:
+    """One-sigma of the initial estimate error, per state group; P0 is built from these."""
+
+    velocity: float = 0.2
+    angle: float = 0.02
+    angle_rate: float = 0.1
+    correlation: float = 0.0
+
+
+@dataclass
+class ControllerConf:
+    """Backstepping gains (α1, α2) per channel group and the tilt limit (rad)."""
+
+    position: list[float] = field(default_factory=lambda: [1.5, 2.0])
+    altitude: list[float] = field(default_factory=lambda: [2.0, 3.0])
+    attitude: list[float] = field(default_factory=lambda: [10.0, 10.0])
+    yaw: list[float] = field(default_factory=lambda: [5.0, 5.0])
+    max_tilt: float = 0.6
+
+
+@dataclass
+class QuadrotorModelConf:
+    """``model=quadrotor``: the OS4 truth, the filter formulation, and the filters' noise."""
+
+    name: str = "quadrotor"
+    formulation: str = "thesis"
+    calibrated: bool = True
+    mass: float = 0.65
+    arm: float = 0.23
+    inertia: list[float] = field(default_factory=lambda: [7.5e-3, 7.5e-3, 1.3e-2])
+    rotor_inertia: float = 6.0e-5
+    thrust_factor: float = 3.13e-5
+    drag_factor: float = 7.5e-7
+    gravity: float = 9.81
+    translational_drag: list[float] = field(default_factory=lambda: [0.25, 0.25, 0.25])
+    rotational_drag: list[float] = field(default_factory=lambda: [1.0e-3, 1.0e-3, 1.0e-3])
+    motor_time_constant: float = 0.05
+    rotor_speed_min: float = 24.0
+    rotor_speed_max: float = 340.0
+    truth_substeps: int = 10
+    process_noise: ProcessNoiseConf = field(default_factory=ProcessNoiseConf)
+    measurement_noise_inflation: float = 1.0
+    initial_std: InitialStdConf = field(default_factory=InitialStdConf)
+    controller: ControllerConf = field(default_factory=ControllerConf)
+
+
+@dataclass
+class TriadConf:
+    """One-sigma error levels of a sensor triad; random terms as continuous densities."""
+
+    scale_factor: float = 0.0
+    asymmetry: float = 0.0
+    cross_coupling: float = 0.0
+    bias: float = 0.0
+    bias_random_walk: float = 0.0
+    white_noise: float = 0.0
+
+
+@dataclass
+class EncoderConf:
+    """Rotor encoders: lines per revolution (0: no quantisation) and white noise (rad/s)."""
+
+    lines: int = 256
+    noise_std: float = 0.0
+
+
+@dataclass
+class SensorConf:
+    """``sensor=ideal|tactical|consumer``; ``error_scale`` multiplies every MIMU error term."""
+
+    name: str = MISSING
+    error_scale: float = 1.0
+    accel: TriadConf = field(default_factory=TriadConf)
+    gyro: TriadConf = field(default_factory=TriadConf)
+    encoder: EncoderConf = field(default_factory=EncoderConf)
+
+
+@dataclass
+class OutputConf:
+    """What a job writes besides the metrics: time series of the first ``saved_runs`` runs and
+    figures of run 0."""
+
+    saved_runs: int = 3
+    figures: bool = True
+
+
+@dataclass
+class ExperimentConf:
+    """The root config: Monte Carlo settings plus the four groups."""
+
+    runs: int = 50
+    seed: int = 2026
+    duration: float = 20.0
+    sample_period: float = 0.01
+    divergence_bound: float = 50.0
+    progress: bool = True
+    model: Any = MISSING
+    sensor: SensorConf = MISSING
+    scenario: Any = MISSING
+    estimator: dict[str, Any] = field(default_factory=dict)
+    output: OutputConf = field(default_factory=OutputConf)
+
+
+def register_schemas() -> None:
+    """Store every schema in Hydra's ConfigStore (idempotent)."""
+    from quadest.estimators.registry import builtin_estimators
+
+    cs = ConfigStore.instance()
+    cs.store(name="experiment_schema", node=ExperimentConf)
+    cs.store(group="schema/model", name="quadrotor", node=QuadrotorModelConf)
+    cs.store(group="schema/sensor", name="sensor", node=SensorConf)
+    for name, cls in SCENARIOS.items():
+        cs.store(group="schema/scenario", name=name, node=cls)
+    for name, spec in builtin_estimators().items():
+        cs.store(group="schema/estimator", name=name, node=spec.params)

@@ -1,0 +1,180 @@
+"""The estimator interface, and the adapter that runs a single-run estimator over a batch.
+
+A batched estimator (:class:`Estimator`) advances every Monte Carlo run of a batch at once:
+means (B, n), covariances (B, n, n), inputs (B, nu), measurements (B, m). A single-run estimator
+(:class:`SingleRunEstimator`) sees one run at a time, with the batch axis dropped; the runner
+wraps it in :class:`PerRunAdapter`, so both kinds look the same from outside.
+
+Optional capabilities are declared in ``capabilities``, never guessed:
+
+- ``"innovation"``: after ``update``, :meth:`Estimator.innovation` returns the innovation
+  ``ν = z − ẑ`` and the lower factor of its covariance (for NIS);
+- ``"sqrt_covariance"``: :attr:`Estimator.sqrt_covariance` is the filter's own factor.
+
+A run that fails (a downdate that would make a covariance indefinite, a non-finite number, an
+exception inside a single-run estimator) is *flagged*: ``failed[i]`` becomes true and
+``failure_reasons[i]`` says why. The other runs carry on unchanged.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+import numpy as np
+
+from quadest.errors import FilterDivergence
+from quadest.models.base import FilterModel
+
+
+class _FailureLog:
+    """Which runs of a batch failed, and why (the first reason is kept)."""
+
+    failed: np.ndarray
+    failure_reasons: dict[int, str]
+
+    def _reset_failures(self, batch: int) -> None:
+        self.failed = np.zeros(batch, dtype=bool)
+        self.failure_reasons = {}
+
+    def flag(self, runs, reason: str) -> None:
+        for r in np.atleast_1d(runs):
+            r = int(r)
+            if not self.failed[r]:
+                self.failed[r] = True
+                self.failure_reasons[r] = reason
+
+
+class Estimator(_FailureLog, ABC):
+    """A filter that advances a batch of runs: leading axis ``B`` on every array."""
+
+    batched: ClassVar[bool] = True
+    capabilities: ClassVar[frozenset[str]] = frozenset()
+
+    def __init__(self, model: FilterModel) -> None:
+        self.model = model
+
+    @abstractmethod
+    def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
+        """Start every run from mean ``x0`` (B, n) and covariance ``P0`` (B, n, n)."""
+
+    @abstractmethod
+    def predict(self, u: np.ndarray) -> None:
+        """Time update with the input ``u`` (B, nu) of the previous sample."""
+
+    @abstractmethod
+    def update(self, z: np.ndarray, u: np.ndarray) -> None:
+        """Measurement update with ``z`` (B, m) and the input ``u`` (B, nu) at that sample."""
+
+    @property
+    @abstractmethod
+    def mean(self) -> np.ndarray:
+        """Current estimate (B, n)."""
+
+    @property
+    @abstractmethod
+    def covariance(self) -> np.ndarray:
+        """Current covariance (B, n, n)."""
+
+    def innovation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Last innovation (B, m) and the lower factor of its covariance (B, m, m)."""
+        raise AttributeError(f"{type(self).__name__} does not declare the 'innovation' capability")
+
+
+class SingleRunEstimator(ABC):
+    """A filter that works on one run: means (n,), covariances (n, n), inputs (nu,), z (m,).
+
+    ``model`` is bound to that single run (a batch of one). Exceptions raised in any method mark
+    the run as failed in the adapter; they never stop the other runs.
+    """
+
+    capabilities: ClassVar[frozenset[str]] = frozenset()
+
+    def __init__(self, model: FilterModel) -> None:
+        self.model = model
+
+    @abstractmethod
+    def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None: ...
+
+    @abstractmethod
+    def predict(self, u: np.ndarray) -> None: ...
+
+    @abstractmethod
+    def update(self, z: np.ndarray, u: np.ndarray) -> None: ...
+
+    @property
+    @abstractmethod
+    def mean(self) -> np.ndarray: ...
+
+    @property
+    @abstractmethod
+    def covariance(self) -> np.ndarray: ...
+
+    def innovation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Last innovation (m,) and its covariance (m, m) (not a factor)."""
+        raise AttributeError(f"{type(self).__name__} does not declare the 'innovation' capability")
+
+
+class PerRunAdapter(Estimator):
+    """Runs one :class:`SingleRunEstimator` per run of the batch behind the batched interface.
+
+    This is the only place where the framework loops over runs in Python.
+    """
+
+    batched: ClassVar[bool] = False
+
+    def __init__(self, model: FilterModel, factory, **params) -> None:
+        super().__init__(model)
+        self.filters: list[SingleRunEstimator] = [
+            factory(model.select(i), **params) for i in range(model.batch_size)
+        ]
+        self.capabilities = frozenset(type(self.filters[0]).capabilities) if self.filters else frozenset()
+        self._reset_failures(model.batch_size)
+        self._mean = np.full((model.batch_size, model.n), np.nan)
+        self._cov = np.full((model.batch_size, model.n, model.n), np.nan)
+        self._nu = np.full((model.batch_size, model.m), np.nan)
+        self._Sy = np.full((model.batch_size, model.m, model.m), np.nan)
+
+    def _each(self, call) -> None:
+        for i, filt in enumerate(self.filters):
+            if self.failed[i]:
+                continue
+            try:
+                call(i, filt)
+                mean, cov = filt.mean, filt.covariance
+                if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+                    raise FilterDivergence("non-finite mean or covariance", [i])
+                self._mean[i], self._cov[i] = mean, cov
+            except Exception as exc:  # a plugin's failure marks its run, never the job
+                reason = exc.reason if isinstance(exc, FilterDivergence) else f"{type(exc).__name__}: {exc}"
+                self.flag(i, reason)
+
+    def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
+        self._reset_failures(len(self.filters))
+        self._each(lambda i, f: f.initialize(x0[i], P0[i]))
+
+    def predict(self, u: np.ndarray) -> None:
+        self._each(lambda i, f: f.predict(u[i]))
+
+    def update(self, z: np.ndarray, u: np.ndarray) -> None:
+        self._each(lambda i, f: f.update(z[i], u[i]))
+
+    @property
+    def mean(self) -> np.ndarray:
+        return self._mean
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return self._cov
+
+    def innovation(self) -> tuple[np.ndarray, np.ndarray]:
+        for i, filt in enumerate(self.filters):
+            if self.failed[i]:
+                continue
+            nu, S = filt.innovation()
+            self._nu[i] = np.ravel(nu)
+            try:
+                self._Sy[i] = np.linalg.cholesky(S)
+            except np.linalg.LinAlgError:
+                self._Sy[i] = np.nan
+        return self._nu, self._Sy

@@ -1,0 +1,231 @@
+"""Quadrotor filter models: the thesis's 6-state formulation and an augmented 9-state one.
+
+``thesis`` (seed 000, eq. 5.30): ``x = [ẋ ẏ ż φ̇ θ̇ ψ̇]``. The Euler angles the equations need are
+*companions*: integrated outside the filter from the estimated rates, as the thesis does
+("integrate X_k to obtain position and Euler angles", §5.3.1). The filter's input is therefore
+``u = [Ω1..Ω4, φ, θ, ψ]``.
+
+``augmented``: ``x = [ẋ ẏ ż φ θ ψ φ̇ θ̇ ψ̇]``, angles in the state, input ``u = [Ω1..Ω4]``.
+
+Both discretise with the sample period T (eq. 5.32, forward Euler):
+
+- ``v⁺ = v + T (R(Θ) e_z U1/m − g e_z − Kt v/m)``
+- ``Θ̇⁺ = Θ̇ + T Θ̈(Θ, Θ̇, Ω)`` with ``Θ̈`` from eq. 5.31 (see :func:`euler_angle_accel`)
+- ``Θ⁺ = Θ + T Θ̇`` (augmented only)
+
+The measurement is the MIMU, ``z = [accelerometer (3), gyro (3)]``: the specific force
+``e_z U1/m − Rᵀ Kt v/m`` and the body rates ``W(Θ) Θ̇``, passed through the sensor's
+deterministic error model. With ``calibrated`` the filter knows each run's drawn errors (the
+thesis's premise that the measurement equation accounts for them); otherwise it assumes nominal,
+error-free sensors (a mismatch experiment).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from quadest.models.base import FilterModel
+from quadest.quadrotor.dynamics import (
+    euler_angle_accel,
+    rotor_inputs,
+    specific_force,
+    translational_accel,
+)
+from quadest.quadrotor.kinematics import (
+    matvec,
+    rate_matrix,
+    rate_matrix_inv,
+    rate_matrix_inv_partials,
+    rotation,
+)
+from quadest.quadrotor.params import QuadrotorParams
+from quadest.sensors.mimu import TriadErrors
+
+FORMULATIONS = ("thesis", "augmented")
+_V = ("vx", "vy", "vz")
+_ANG = ("phi", "theta", "psi")
+_RATE = ("phi_dot", "theta_dot", "psi_dot")
+_POS = ("x", "y", "z")
+
+
+class QuadrotorFilterModel(FilterModel):
+    """Filter model of the quadrotor with a MIMU, bound to a batch of Monte Carlo runs.
+
+    Args:
+        params: physical parameters the filter assumes.
+        formulation: ``"thesis"`` or ``"augmented"``.
+        sample_period: T (s).
+        Q, R: process and measurement noise covariances.
+        accel_errors, gyro_errors: deterministic sensor errors the filter assumes, per run.
+    """
+
+    def __init__(
+        self,
+        params: QuadrotorParams,
+        formulation: str,
+        sample_period: float,
+        Q: np.ndarray,
+        R: np.ndarray,
+        accel_errors: TriadErrors,
+        gyro_errors: TriadErrors,
+    ) -> None:
+        if formulation not in FORMULATIONS:
+            raise ValueError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
+        self.name = f"quadrotor_{formulation}"
+        self.params = params
+        self.formulation = formulation
+        self.thesis = formulation == "thesis"
+        self.dt = sample_period
+        self.accel_errors = accel_errors
+        self.gyro_errors = gyro_errors
+        self.batch_size = accel_errors.bias.shape[0]
+        if self.thesis:
+            self.state_names = _V + _RATE
+            self.companion_names = _POS + _ANG
+            self.companion_units = ("m",) * 3 + ("rad",) * 3
+            self.nu = 7
+        else:
+            self.state_names = _V + _ANG + _RATE
+            self.companion_names = _POS
+            self.companion_units = ("m",) * 3
+            self.nu = 4
+        self.n = len(self.state_names)
+        self.state_units = tuple(
+            "m/s" if s in _V else "rad" if s in _ANG else "rad/s" for s in self.state_names
+        )
+        self.measurement_names = ("acc_x", "acc_y", "acc_z", "gyro_p", "gyro_q", "gyro_r")
+        self.m = 6
+        self.Q = np.asarray(Q, dtype=float)
+        self.R = np.asarray(R, dtype=float)
+        self._rate_slice = slice(3, 6) if self.thesis else slice(6, 9)
+
+    def _per_run_arrays(self) -> tuple[str, ...]:
+        return ("accel_errors", "gyro_errors")
+
+    # --- mapping from the 16-state truth ---
+
+    def truth_to_state(self, truth: np.ndarray) -> np.ndarray:
+        """Filter state of the truth (..., 16) → (..., n)."""
+        v, angles, omega = truth[..., 3:6], truth[..., 6:9], truth[..., 9:12]
+        rates = matvec(rate_matrix_inv(angles), omega)
+        parts = [v, rates] if self.thesis else [v, angles, rates]
+        return np.concatenate(parts, axis=-1)
+
+    def truth_to_companion(self, truth: np.ndarray) -> np.ndarray:
+        """Companion values of the truth (..., 16) → (..., len(companion_names))."""
+        return truth[..., 0:9].take([0, 1, 2, 6, 7, 8] if self.thesis else [0, 1, 2], axis=-1)
+
+    # --- companions (thesis §5.3.1: integrate the estimate) ---
+
+    def filter_input(self, u: np.ndarray, companion: np.ndarray) -> np.ndarray:
+        return np.concatenate([u, companion[:, 3:6]], axis=-1) if self.thesis else u
+
+    def companion_step(self, companion: np.ndarray, x_post: np.ndarray) -> np.ndarray:
+        out = companion.copy()
+        out[:, 0:3] += self.dt * x_post[:, 0:3]
+        if self.thesis:
+            out[:, 3:6] += self.dt * x_post[:, 3:6]
+        return out
+
+    # --- model functions ---
+
+    def _split(self, x: np.ndarray, u: np.ndarray):
+        speeds = u[:, None, 0:4]
+        if self.thesis:
+            angles = np.broadcast_to(u[:, None, 4:7], x.shape[:-1] + (3,))
+            return x[..., 0:3], angles, x[..., 3:6], speeds
+        return x[..., 0:3], x[..., 3:6], x[..., 6:9], speeds
+
+    def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        v, angles, rates, speeds = self._split(x, u)
+        U, _ = rotor_inputs(self.params, speeds)
+        T = self.dt
+        v_next = v + T * translational_accel(self.params, angles, v, U[..., 0])
+        rates_next = rates + T * euler_angle_accel(self.params, angles, rates, speeds)
+        if self.thesis:
+            return np.concatenate([v_next, rates_next], axis=-1)
+        return np.concatenate([v_next, angles + T * rates, rates_next], axis=-1)
+
+    def _ideal_measurement(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        v, angles, rates, speeds = self._split(x, u)
+        U, _ = rotor_inputs(self.params, speeds)
+        acc = specific_force(self.params, angles, v, U[..., 0])
+        gyro = matvec(rate_matrix(angles), rates)
+        return acc, gyro
+
+    def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        acc, gyro = self._ideal_measurement(x, u)
+        return np.concatenate([self.accel_errors.apply(acc), self.gyro_errors.apply(gyro)], axis=-1)
+
+    # --- Jacobians ---
+
+    def _rate_accel_jacobian(self, angles: np.ndarray, rates: np.ndarray, speeds: np.ndarray) -> np.ndarray:
+        """``∂Θ̈/∂Θ̇`` (B, 3, 3) at fixed angles, analytic.
+
+        ``Θ̈ = Ẇ⁻¹ ω + W⁻¹ ω̇(ω)``, ``ω = W Θ̇``, ``Ẇ⁻¹ = ∂W⁻¹/∂φ φ̇ + ∂W⁻¹/∂θ θ̇``, so
+        ``∂Θ̈/∂Θ̇ = [∂W⁻¹/∂φ ω, ∂W⁻¹/∂θ ω, 0] + Ẇ⁻¹ W + W⁻¹ (∂ω̇/∂ω) W``.
+        """
+        p = self.params
+        W = rate_matrix(angles)
+        W_inv = rate_matrix_inv(angles)
+        omega = matvec(W, rates)
+        d_phi, d_theta = rate_matrix_inv_partials(angles)
+        w_inv_dot = d_phi * rates[:, 0, None, None] + d_theta * rates[:, 1, None, None]
+        first = np.stack(
+            [matvec(d_phi, omega), matvec(d_theta, omega), np.zeros_like(omega)], axis=-1
+        )
+        ix, iy, iz = p.inertia
+        kr = p.kr
+        _, omega_r = rotor_inputs(p, speeds)
+        jw = p.rotor_inertia * omega_r
+        pp, qq, rr = omega[:, 0], omega[:, 1], omega[:, 2]
+        zero = np.zeros_like(pp)
+        J_wdot = np.stack(
+            [
+                np.stack([-kr[0] + zero, (iy - iz) * rr - jw, (iy - iz) * qq], axis=-1) / ix,
+                np.stack([(iz - ix) * rr + jw, -kr[1] + zero, (iz - ix) * pp], axis=-1) / iy,
+                np.stack([(ix - iy) * qq, (ix - iy) * pp, -kr[2] + zero], axis=-1) / iz,
+            ],
+            axis=-2,
+        )
+        return first + w_inv_dot @ W + W_inv @ J_wdot @ W
+
+    def _complex_step_columns(self, fun, x: np.ndarray, u: np.ndarray, cols: range) -> np.ndarray:
+        """Columns ``cols`` of the Jacobian of ``fun`` by the complex step (exact to round-off)."""
+        step = 1e-30
+        pts = np.repeat(x[:, None, :].astype(complex), len(cols), axis=1)
+        for i, j in enumerate(cols):
+            pts[:, i, j] += 1j * step
+        return np.swapaxes(fun(pts, u).imag / step, -1, -2)
+
+    def F_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Jacobian of ``f`` (B, n, n).
+
+        Velocity and rate columns are analytic; for ``augmented`` the three angle columns
+        (derivatives of R(Θ) and of W⁻¹(Θ) and its derivatives) come from the complex step,
+        which is exact to round-off.
+        """
+        v, angles, rates, speeds = self._split(x[:, None, :], u)
+        B, n, T = x.shape[0], self.n, self.dt
+        J = np.broadcast_to(np.eye(n), (B, n, n)).copy()
+        J[:, 0:3, 0:3] -= T * np.diag(self.params.kt / self.params.mass)
+        rs = self._rate_slice
+        J[:, rs, rs] += T * self._rate_accel_jacobian(angles[:, 0], rates[:, 0], speeds[:, 0])
+        if not self.thesis:
+            J[:, 3:6, 6:9] += T * np.eye(3)
+            J[:, :, 3:6] = self._complex_step_columns(self.f, x, u, range(3, 6))
+        return J
+
+    def H_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Jacobian of ``h`` (B, 6, n): analytic in velocity and rates, complex step in angles."""
+        v, angles, rates, speeds = self._split(x[:, None, :], u)
+        acc, gyro = self._ideal_measurement(x[:, None, :], u)
+        B = x.shape[0]
+        J = np.zeros((B, 6, self.n))
+        R = rotation(angles[:, 0])
+        d_acc_dv = -np.swapaxes(R, -1, -2) * (self.params.kt / self.params.mass)
+        J[:, 0:3, 0:3] = self.accel_errors.jacobian(acc[:, 0]) @ d_acc_dv
+        J[:, 3:6, self._rate_slice] = self.gyro_errors.jacobian(gyro[:, 0]) @ rate_matrix(angles[:, 0])
+        if not self.thesis:
+            J[:, :, 3:6] = self._complex_step_columns(self.h, x, u, range(3, 6))
+        return J

@@ -1,0 +1,26 @@
+"""Shared numerics for every sigma-point filter: weights, sigma points, the unscented
+transform, the square-root helpers (qr, cholupdate) and the triangular-solve Kalman gain.
+
+Everything works on a leading batch axis of independent Monte Carlo runs.
+"""
+
+from quadest.numerics.sigma_points import (
+    UTWeights,
+    sigma_points,
+    unscented_transform,
+    ut_weights,
+    weighted_mean,
+)
+from quadest.numerics.square_root import cholupdate, kalman_gain, qr_factor, whiten
+
+__all__ = [
+    "UTWeights",
+    "cholupdate",
+    "kalman_gain",
+    "qr_factor",
+    "sigma_points",
+    "unscented_transform",
+    "ut_weights",
+    "weighted_mean",
+    "whiten",
+]

@@ -1,0 +1,126 @@
+"""Square-root helpers of the thesis SR-UKF (seed 000, §5.2.3), batched over Monte Carlo runs.
+
+Every function takes arrays with a leading batch axis ``B``; factors are lower triangular with a
+positive diagonal, so that ``P = S @ S.T`` for each run.
+
+- :func:`qr_factor` is the thesis's ``qr{·}``: the lower Cholesky factor of ``A Aᵀ`` from a QR
+  decomposition of ``Aᵀ``, with the signs of the diagonal made positive.
+- :func:`cholupdate` is ``cholupdate{S, u, ±ν}``: the factor of ``S Sᵀ ± ν u uᵀ``, O(n²) per
+  vector, applied column by column for a matrix ``u``. A downdate that would make the matrix
+  indefinite raises :class:`~quadest.errors.DowndateError` naming the failed runs.
+- :func:`kalman_gain` is eq. 5.26: ``K = (Pxy / Syᵀ) / Sy``, two triangular solves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from quadest.errors import DowndateError
+
+
+def qr_factor(A: np.ndarray) -> np.ndarray:
+    """Lower-triangular factor ``S`` with positive diagonal such that ``S Sᵀ = A Aᵀ``.
+
+    ``A`` has shape (B, n, L) with L ≥ n. The thesis writes this ``qr{A}`` (eqs 5.18, 5.23):
+    factorise ``Aᵀ = Q R``; then ``A Aᵀ = Rᵀ R``. NumPy's ``R`` may carry negative diagonal
+    entries, which :func:`cholupdate` cannot use, so each row of ``R`` is multiplied by the sign
+    of its diagonal element (``Rᵀ R`` is unchanged by that).
+    """
+    A = np.asarray(A, dtype=float)
+    n, L = A.shape[-2:]
+    if L < n:
+        raise ValueError(f"qr_factor needs at least as many columns as rows, got A of shape {A.shape}")
+    R = np.linalg.qr(np.swapaxes(A, -1, -2), mode="r")
+    signs = np.sign(np.diagonal(R, axis1=-2, axis2=-1))
+    signs = np.where(signs == 0.0, 1.0, signs)
+    return np.swapaxes(R * signs[..., :, None], -1, -2)
+
+
+def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
+    """Cholesky factor of ``S Sᵀ + ν u uᵀ`` (an update for ν > 0, a downdate for ν < 0).
+
+    Shapes: ``S`` (B, n, n) lower triangular with a positive diagonal; ``u`` (B, n) for a rank-one
+    change or (B, n, k) for ``k`` sequential rank-one changes, one per column (eq. 5.29). The input
+    arrays are not modified.
+
+    Raises:
+        DowndateError: when a downdate would leave a non-positive pivot in some runs. The error's
+            ``runs`` names them; ``result`` holds the factor computed for every run, whose rows
+            for the failed runs are meaningless but finite, so a batched filter can flag the
+            failed runs and continue with the others.
+    """
+    L = np.array(S, dtype=float, copy=True)
+    x = np.array(u, dtype=float, copy=True)
+    if x.ndim == L.ndim - 1:
+        x = x[..., None]
+    if x.shape[:-1] != L.shape[:-1]:
+        raise ValueError(f"cholupdate: u of shape {np.shape(u)} does not fit S of shape {L.shape}")
+    sigma = 1.0 if nu >= 0 else -1.0
+    x *= np.sqrt(abs(nu))
+    n = L.shape[-1]
+    failed = np.zeros(L.shape[:-2], dtype=bool)
+    for j in range(x.shape[-1]):
+        v = x[..., j]
+        for k in range(n):
+            Lkk = L[..., k, k]
+            vk = v[..., k]
+            r2 = Lkk * Lkk + sigma * vk * vk
+            bad = ~((r2 > 0.0) & (Lkk > 0.0))
+            if bad.any():
+                failed |= bad
+                r2 = np.where(bad, 1.0, r2)
+                Lkk = np.where(bad, 1.0, Lkk)
+                vk = np.where(bad, 0.0, vk)
+            r = np.sqrt(r2)
+            c = r / Lkk
+            s = vk / Lkk
+            L[..., k, k] = r
+            if k + 1 < n:
+                col = (L[..., k + 1 :, k] + sigma * s[..., None] * v[..., k + 1 :]) / c[..., None]
+                L[..., k + 1 :, k] = col
+                v[..., k + 1 :] = c[..., None] * v[..., k + 1 :] - s[..., None] * col
+    if failed.any():
+        err = DowndateError(
+            "Cholesky downdate would make the covariance indefinite", np.flatnonzero(failed)
+        )
+        err.result = L
+        raise err
+    return L
+
+
+def _solve_lower(L: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Forward substitution ``L y = b`` for lower-triangular ``L`` (B, m, m), ``b`` (B, m, k)."""
+    y = np.empty(np.broadcast_shapes(L.shape[:-2], b.shape[:-2]) + b.shape[-2:])
+    for i in range(L.shape[-1]):
+        acc = b[..., i, :] - np.einsum("...j,...jk->...k", L[..., i, :i], y[..., :i, :])
+        y[..., i, :] = acc / L[..., i, i, None]
+    return y
+
+
+def _solve_upper_transposed(L: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Back substitution ``Lᵀ y = b`` for lower-triangular ``L`` (B, m, m), ``b`` (B, m, k)."""
+    m = L.shape[-1]
+    y = np.empty(np.broadcast_shapes(L.shape[:-2], b.shape[:-2]) + b.shape[-2:])
+    for i in range(m - 1, -1, -1):
+        acc = b[..., i, :] - np.einsum("...j,...jk->...k", L[..., i + 1 :, i], y[..., i + 1 :, :])
+        y[..., i, :] = acc / L[..., i, i, None]
+    return y
+
+
+def kalman_gain(Pxy: np.ndarray, Sy: np.ndarray) -> np.ndarray:
+    """Kalman gain ``K = Pxy (Sy Syᵀ)⁻¹`` by two triangular solves (thesis eq. 5.26).
+
+    ``Pxy`` is (B, n, m) and ``Sy`` the lower factor (B, m, m) of the innovation covariance.
+    ``K Sy Syᵀ = Pxy`` is solved as ``Sy A = Pxyᵀ`` (forward) then ``Syᵀ Kᵀ = A`` (backward);
+    no matrix is inverted.
+    """
+    A = _solve_lower(Sy, np.swapaxes(Pxy, -1, -2))
+    return np.swapaxes(_solve_upper_transposed(Sy, A), -1, -2)
+
+
+def whiten(S: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``S⁻¹ r`` for lower-triangular ``S`` (B, m, m) and vectors ``r`` (B, m).
+
+    ``|S⁻¹ r|²`` is the Mahalanobis form ``rᵀ (S Sᵀ)⁻¹ r`` used for NEES and NIS.
+    """
+    return _solve_lower(S, r[..., None])[..., 0]
