@@ -123,6 +123,7 @@ class ExperimentConf:
     sample_period: float = 0.01
     divergence_bound: float = 50.0
     progress: bool = True
+    workers: int = 0
     model: Any = MISSING
     sensor: SensorConf = MISSING
     scenario: Any = MISSING

@@ -62,7 +62,7 @@ class SRUKF(Estimator):
         self._x_safe, self._S_safe = self.x.copy(), self.S.copy()
         self._reset_failures(self.x.shape[0])
         self._nu = np.zeros((self.x.shape[0], self.model.m))
-        self._Sy = np.broadcast_to(self.sqrt_R, (self.x.shape[0],) + self.sqrt_R.shape).copy()
+        self._Sy = np.broadcast_to(self.sqrt_R, (self.x.shape[0], *self.sqrt_R.shape)).copy()
 
     def _cholupdate(self, S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
         try:
@@ -86,7 +86,7 @@ class SRUKF(Estimator):
         (eqs 5.18–5.19 and 5.23–5.24)."""
         dev = points[:, 1:, :] - mean[:, None, :]
         B = points.shape[0]
-        noise = np.broadcast_to(sqrt_noise, (B,) + sqrt_noise.shape)
+        noise = np.broadcast_to(sqrt_noise, (B, *sqrt_noise.shape))
         A = np.concatenate([self._sqrt_w1 * np.swapaxes(dev, -1, -2), noise], axis=-1)
         return self._cholupdate(qr_factor(A), points[:, 0, :] - mean, self.weights.wc[0])
 

@@ -26,7 +26,9 @@ import numpy as np
 
 from quadest.models.base import FilterModel
 from quadest.quadrotor.dynamics import (
-    euler_angle_accel,
+    body_rates,
+    euler_angle_accel_from_inputs,
+    euler_rates,
     rotor_inputs,
     specific_force,
     translational_accel,
@@ -107,7 +109,7 @@ class QuadrotorFilterModel(FilterModel):
     def truth_to_state(self, truth: np.ndarray) -> np.ndarray:
         """Filter state of the truth (..., 16) → (..., n)."""
         v, angles, omega = truth[..., 3:6], truth[..., 6:9], truth[..., 9:12]
-        rates = matvec(rate_matrix_inv(angles), omega)
+        rates = euler_rates(angles, omega)
         parts = [v, rates] if self.thesis else [v, angles, rates]
         return np.concatenate(parts, axis=-1)
 
@@ -132,25 +134,28 @@ class QuadrotorFilterModel(FilterModel):
     def _split(self, x: np.ndarray, u: np.ndarray):
         speeds = u[:, None, 0:4]
         if self.thesis:
-            angles = np.broadcast_to(u[:, None, 4:7], x.shape[:-1] + (3,))
+            angles = np.broadcast_to(u[:, None, 4:7], (*x.shape[:-1], 3))
             return x[..., 0:3], angles, x[..., 3:6], speeds
         return x[..., 0:3], x[..., 3:6], x[..., 6:9], speeds
 
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         v, angles, rates, speeds = self._split(x, u)
-        U, _ = rotor_inputs(self.params, speeds)
+        U, omega_r = rotor_inputs(self.params, speeds)
         T = self.dt
-        v_next = v + T * translational_accel(self.params, angles, v, U[..., 0])
-        rates_next = rates + T * euler_angle_accel(self.params, angles, rates, speeds)
-        if self.thesis:
-            return np.concatenate([v_next, rates_next], axis=-1)
-        return np.concatenate([v_next, angles + T * rates, rates_next], axis=-1)
+        out = np.empty(x.shape, dtype=np.result_type(x, u))
+        out[..., 0:3] = v + T * translational_accel(self.params, angles, v, U[..., 0])
+        out[..., self._rate_slice] = rates + T * euler_angle_accel_from_inputs(
+            self.params, angles, rates, U[..., 1:], omega_r
+        )
+        if not self.thesis:
+            out[..., 3:6] = angles + T * rates
+        return out
 
     def _ideal_measurement(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         v, angles, rates, speeds = self._split(x, u)
         U, _ = rotor_inputs(self.params, speeds)
         acc = specific_force(self.params, angles, v, U[..., 0])
-        gyro = matvec(rate_matrix(angles), rates)
+        gyro = body_rates(angles, rates)
         return acc, gyro
 
     def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -168,26 +173,21 @@ class QuadrotorFilterModel(FilterModel):
         p = self.params
         W = rate_matrix(angles)
         W_inv = rate_matrix_inv(angles)
-        omega = matvec(W, rates)
+        omega = body_rates(angles, rates)
         d_phi, d_theta = rate_matrix_inv_partials(angles)
         w_inv_dot = d_phi * rates[:, 0, None, None] + d_theta * rates[:, 1, None, None]
-        first = np.stack(
-            [matvec(d_phi, omega), matvec(d_theta, omega), np.zeros_like(omega)], axis=-1
-        )
+        first = np.zeros((*omega.shape, 3), dtype=omega.dtype)
+        first[..., :, 0] = matvec(d_phi, omega)
+        first[..., :, 1] = matvec(d_theta, omega)
         ix, iy, iz = p.inertia
         kr = p.kr
         _, omega_r = rotor_inputs(p, speeds)
         jw = p.rotor_inertia * omega_r
         pp, qq, rr = omega[:, 0], omega[:, 1], omega[:, 2]
-        zero = np.zeros_like(pp)
-        J_wdot = np.stack(
-            [
-                np.stack([-kr[0] + zero, (iy - iz) * rr - jw, (iy - iz) * qq], axis=-1) / ix,
-                np.stack([(iz - ix) * rr + jw, -kr[1] + zero, (iz - ix) * pp], axis=-1) / iy,
-                np.stack([(ix - iy) * qq, (ix - iy) * pp, -kr[2] + zero], axis=-1) / iz,
-            ],
-            axis=-2,
-        )
+        J_wdot = np.empty_like(first)
+        J_wdot[:, 0, 0], J_wdot[:, 0, 1], J_wdot[:, 0, 2] = -kr[0] / ix, ((iy - iz) * rr - jw) / ix, (iy - iz) * qq / ix
+        J_wdot[:, 1, 0], J_wdot[:, 1, 1], J_wdot[:, 1, 2] = ((iz - ix) * rr + jw) / iy, -kr[1] / iy, (iz - ix) * pp / iy
+        J_wdot[:, 2, 0], J_wdot[:, 2, 1], J_wdot[:, 2, 2] = (ix - iy) * qq / iz, (ix - iy) * pp / iz, -kr[2] / iz
         return first + w_inv_dot @ W + W_inv @ J_wdot @ W
 
     def _complex_step_columns(self, fun, x: np.ndarray, u: np.ndarray, cols: range) -> np.ndarray:
@@ -205,7 +205,7 @@ class QuadrotorFilterModel(FilterModel):
         (derivatives of R(Θ) and of W⁻¹(Θ) and its derivatives) come from the complex step,
         which is exact to round-off.
         """
-        v, angles, rates, speeds = self._split(x[:, None, :], u)
+        _v, angles, rates, speeds = self._split(x[:, None, :], u)
         B, n, T = x.shape[0], self.n, self.dt
         J = np.broadcast_to(np.eye(n), (B, n, n)).copy()
         J[:, 0:3, 0:3] -= T * np.diag(self.params.kt / self.params.mass)
@@ -218,7 +218,7 @@ class QuadrotorFilterModel(FilterModel):
 
     def H_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Jacobian of ``h`` (B, 6, n): analytic in velocity and rates, complex step in angles."""
-        v, angles, rates, speeds = self._split(x[:, None, :], u)
+        _v, angles, _rates, _speeds = self._split(x[:, None, :], u)
         acc, gyro = self._ideal_measurement(x[:, None, :], u)
         B = x.shape[0]
         J = np.zeros((B, 6, self.n))

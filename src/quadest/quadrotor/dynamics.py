@@ -13,13 +13,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadest.quadrotor.kinematics import (
-    matvec,
-    rate_matrix,
-    rate_matrix_inv,
-    rate_matrix_inv_partials,
-    rotation,
-)
 from quadest.quadrotor.params import QuadrotorParams
 
 TRUTH_STATE_NAMES = (
@@ -30,8 +23,16 @@ TRUTH_STATE_NAMES = (
 
 def rotor_inputs(params: QuadrotorParams, speeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Thrust and torques ``U = [U1, U2, U3, U4]`` (..., 4) and the rotor gyroscopic speed
-    ``Ωr = Ω1 − Ω2 + Ω3 − Ω4`` (...) from rotor speeds (..., 4)."""
-    U = matvec(params.mixer, speeds * speeds)
+    ``Ωr = Ω1 − Ω2 + Ω3 − Ω4`` (...) from rotor speeds (..., 4), OS4 convention:
+    ``U1 = b ΣΩi²``, ``U2 = l b (Ω4² − Ω2²)``, ``U3 = l b (Ω3² − Ω1²)``,
+    ``U4 = d (Ω1² − Ω2² + Ω3² − Ω4²)`` (the rows of ``params.mixer``)."""
+    sq = speeds * speeds
+    b, d, lb = params.thrust_factor, params.drag_factor, params.arm * params.thrust_factor
+    U = np.empty(sq.shape, dtype=sq.dtype)
+    U[..., 0] = b * (sq[..., 0] + sq[..., 1] + sq[..., 2] + sq[..., 3])
+    U[..., 1] = lb * (sq[..., 3] - sq[..., 1])
+    U[..., 2] = lb * (sq[..., 2] - sq[..., 0])
+    U[..., 3] = d * (sq[..., 0] - sq[..., 1] + sq[..., 2] - sq[..., 3])
     omega_r = speeds[..., 0] - speeds[..., 1] + speeds[..., 2] - speeds[..., 3]
     return U, omega_r
 
@@ -54,25 +55,67 @@ def body_angular_accel(
     return out
 
 
+def _trig(angles: np.ndarray) -> tuple[np.ndarray, ...]:
+    return (np.sin(angles[..., 0]), np.cos(angles[..., 0]), np.sin(angles[..., 1]),
+            np.cos(angles[..., 1]), np.sin(angles[..., 2]), np.cos(angles[..., 2]))
+
+
 def translational_accel(
     params: QuadrotorParams, angles: np.ndarray, v: np.ndarray, thrust: np.ndarray
 ) -> np.ndarray:
-    """``v̇`` (..., 3) in the earth frame: thrust along the body z axis, gravity and linear drag."""
-    body_z = rotation(angles)[..., :, 2]
-    acc = body_z * (thrust / params.mass)[..., None] - params.kt * v / params.mass
-    return acc - np.array([0.0, 0.0, params.gravity])
+    """``v̇`` (..., 3) in the earth frame: ``R(Θ) e_z U1/m − g e_z − Kt v/m``, element by element
+    (the third column of ``R(Θ)`` is the body z axis)."""
+    sf, cf, st, ct, sp, cp = _trig(angles)
+    a = thrust / params.mass
+    kt = params.kt / params.mass
+    shape = np.broadcast_shapes(angles.shape, v.shape, (*thrust.shape, 3))
+    out = np.empty(shape, dtype=np.result_type(angles, v, thrust))
+    out[..., 0] = (cp * st * cf + sp * sf) * a - kt[0] * v[..., 0]
+    out[..., 1] = (sp * st * cf - cp * sf) * a - kt[1] * v[..., 1]
+    out[..., 2] = ct * cf * a - kt[2] * v[..., 2] - params.gravity
+    return out
 
 
 def specific_force(
     params: QuadrotorParams, angles: np.ndarray, v: np.ndarray, thrust: np.ndarray
 ) -> np.ndarray:
-    """What an ideal accelerometer measures: ``f_b = Rᵀ (v̇ + g e_z) = e_z U1/m − Rᵀ Kt v / m``."""
-    R = rotation(angles)
-    drag_body = np.einsum("...ji,...j->...i", R, params.kt * v) / params.mass
-    f = -drag_body
-    return f + np.stack(
-        [np.zeros_like(thrust), np.zeros_like(thrust), thrust / params.mass], axis=-1
-    )
+    """What an ideal accelerometer measures: ``f_b = Rᵀ (v̇ + g e_z) = e_z U1/m − Rᵀ Kt v / m``.
+
+    Component i of ``Rᵀ d`` is column i of ``R(Θ)`` dotted with ``d``."""
+    sf, cf, st, ct, sp, cp = _trig(angles)
+    kt = params.kt / params.mass
+    d0, d1, d2 = kt[0] * v[..., 0], kt[1] * v[..., 1], kt[2] * v[..., 2]
+    shape = np.broadcast_shapes(angles.shape, v.shape, (*thrust.shape, 3))
+    out = np.empty(shape, dtype=np.result_type(angles, v, thrust))
+    out[..., 0] = -(cp * ct * d0 + sp * ct * d1 - st * d2)
+    out[..., 1] = -((cp * st * sf - sp * cf) * d0 + (sp * st * sf + cp * cf) * d1 + ct * sf * d2)
+    out[..., 2] = thrust / params.mass - ((cp * st * cf + sp * sf) * d0 + (sp * st * cf - cp * sf) * d1 + ct * cf * d2)
+    return out
+
+
+def euler_rates(angles: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """``Θ̇ = W(Θ)⁻¹ ω`` (thesis eq. 2.64): ``φ̇ = p + (q sφ + r cφ) tθ``, ``θ̇ = q cφ − r sφ``,
+    ``ψ̇ = (q sφ + r cφ)/cθ``."""
+    sf, cf = np.sin(angles[..., 0]), np.cos(angles[..., 0])
+    tt, ct = np.tan(angles[..., 1]), np.cos(angles[..., 1])
+    p, q, r = omega[..., 0], omega[..., 1], omega[..., 2]
+    a = q * sf + r * cf
+    out = np.empty(np.broadcast_shapes(angles.shape, omega.shape), dtype=np.result_type(angles, omega))
+    out[..., 0] = p + a * tt
+    out[..., 1] = q * cf - r * sf
+    out[..., 2] = a / ct
+    return out
+
+
+def body_rates(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """``ω = W(Θ) Θ̇``: ``p = φ̇ − sθ ψ̇``, ``q = cφ θ̇ + sφ cθ ψ̇``, ``r = −sφ θ̇ + cφ cθ ψ̇``."""
+    sf, cf = np.sin(angles[..., 0]), np.cos(angles[..., 0])
+    st, ct = np.sin(angles[..., 1]), np.cos(angles[..., 1])
+    out = np.empty(np.broadcast_shapes(angles.shape, rates.shape), dtype=np.result_type(angles, rates))
+    out[..., 0] = rates[..., 0] - st * rates[..., 2]
+    out[..., 1] = cf * rates[..., 1] + sf * ct * rates[..., 2]
+    out[..., 2] = -sf * rates[..., 1] + cf * ct * rates[..., 2]
+    return out
 
 
 def euler_angle_accel(
@@ -80,40 +123,42 @@ def euler_angle_accel(
 ) -> np.ndarray:
     """Euler-angle accelerations ``Θ̈ = (d/dt W⁻¹) ω + W⁻¹ ω̇`` (thesis eq. 5.31).
 
-    ``angles`` and ``rates`` are Θ and Θ̇ (..., 3); ``speeds`` the rotor speeds (..., 4).
+    ``angles`` and ``rates`` are Θ and Θ̇ (..., 3); ``speeds`` the rotor speeds (..., 4). With
+    ``a = q sφ + r cφ`` and ``c = q cφ − r sφ``: ``∂W⁻¹/∂φ ω = (tθ c, −a, c/cθ)`` and
+    ``∂W⁻¹/∂θ ω = (a/cθ², 0, a tθ/cθ)``. (The first matrix printed in eq. 5.31 is the sum of
+    the two partials without the factors φ̇ and θ̇; we use the time derivative.)
     """
-    omega = matvec(rate_matrix(angles), rates)
     U, omega_r = rotor_inputs(params, speeds)
-    omega_dot = body_angular_accel(params, omega, U[..., 1:], omega_r)
-    d_phi, d_theta = rate_matrix_inv_partials(angles)
-    w_inv_dot = d_phi * rates[..., 0, None, None] + d_theta * rates[..., 1, None, None]
-    return matvec(w_inv_dot, omega) + matvec(rate_matrix_inv(angles), omega_dot)
+    return euler_angle_accel_from_inputs(params, angles, rates, U[..., 1:], omega_r)
+
+
+def euler_angle_accel_from_inputs(
+    params: QuadrotorParams, angles: np.ndarray, rates: np.ndarray, torques: np.ndarray, omega_r: np.ndarray
+) -> np.ndarray:
+    """:func:`euler_angle_accel` from the torques and ``Ωr`` (when the caller has them already)."""
+    omega = body_rates(angles, rates)
+    wd = body_angular_accel(params, omega, torques, omega_r)
+    sf, cf = np.sin(angles[..., 0]), np.cos(angles[..., 0])
+    tt, sec = np.tan(angles[..., 1]), 1.0 / np.cos(angles[..., 1])
+    q, r = omega[..., 1], omega[..., 2]
+    a, c = q * sf + r * cf, q * cf - r * sf
+    ad = wd[..., 1] * sf + wd[..., 2] * cf
+    phi_dot, theta_dot = rates[..., 0], rates[..., 1]
+    out = np.empty(omega.shape, dtype=omega.dtype)
+    out[..., 0] = phi_dot * tt * c + theta_dot * sec * sec * a + wd[..., 0] + tt * ad
+    out[..., 1] = -phi_dot * a + wd[..., 1] * cf - wd[..., 2] * sf
+    out[..., 2] = phi_dot * sec * c + theta_dot * tt * sec * a + sec * ad
+    return out
 
 
 def truth_derivative(params: QuadrotorParams, state: np.ndarray, speed_cmd: np.ndarray) -> np.ndarray:
-    """Time derivative of the 16-state truth (..., 16) under commanded rotor speeds (..., 4).
-
-    Written element by element (the hot loop of the truth simulation); the tests check it
-    against the matrix forms :func:`translational_accel`, :func:`body_angular_accel` and
-    ``W⁻¹ ω``.
-    """
-    v, omega, speeds = state[..., 3:6], state[..., 9:12], state[..., 12:16]
-    sf, cf = np.sin(state[..., 6]), np.cos(state[..., 6])
-    st, ct = np.sin(state[..., 7]), np.cos(state[..., 7])
-    sp, cp = np.sin(state[..., 8]), np.cos(state[..., 8])
+    """Time derivative of the 16-state truth (..., 16) under commanded rotor speeds (..., 4)."""
+    v, angles, omega, speeds = state[..., 3:6], state[..., 6:9], state[..., 9:12], state[..., 12:16]
     U, omega_r = rotor_inputs(params, speeds)
-    a = U[..., 0] / params.mass
-    kt = params.kt / params.mass
-    out = np.empty(np.broadcast_shapes(state.shape, speed_cmd.shape[:-1] + (16,)), dtype=state.dtype)
+    out = np.empty(np.broadcast_shapes(state.shape, (*speed_cmd.shape[:-1], 16)), dtype=state.dtype)
     out[..., 0:3] = v
-    out[..., 3] = (cp * st * cf + sp * sf) * a - kt[0] * v[..., 0]
-    out[..., 4] = (sp * st * cf - cp * sf) * a - kt[1] * v[..., 1]
-    out[..., 5] = ct * cf * a - kt[2] * v[..., 2] - params.gravity
-    p, q, r = omega[..., 0], omega[..., 1], omega[..., 2]
-    qs_rc = q * sf + r * cf
-    out[..., 6] = p + qs_rc * st / ct
-    out[..., 7] = q * cf - r * sf
-    out[..., 8] = qs_rc / ct
+    out[..., 3:6] = translational_accel(params, angles, v, U[..., 0])
+    out[..., 6:9] = euler_rates(angles, omega)
     out[..., 9:12] = body_angular_accel(params, omega, U[..., 1:], omega_r)
     out[..., 12:16] = (speed_cmd - speeds) / params.motor_time_constant
     return out

@@ -11,7 +11,14 @@ import numpy as np
 
 
 def _stack3x3(rows: list[list[np.ndarray]]) -> np.ndarray:
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    """A (..., 3, 3) array from nine broadcastable entries (filled in place: cheaper than
+    stacking for the small arrays of a single-run filter)."""
+    entries = [e for row in rows for e in row]
+    out = np.empty((*np.broadcast_shapes(*(np.shape(e) for e in entries)), 3, 3), dtype=np.result_type(*entries))
+    for i, row in enumerate(rows):
+        for j, e in enumerate(row):
+            out[..., i, j] = e
+    return out
 
 
 def rotation(angles: np.ndarray) -> np.ndarray:

@@ -45,7 +45,7 @@ def simulate_truth(
     ``initial_position`` (B, 3) sets where each run starts, at rest with the rotors at hover speed.
     """
     B = initial_position.shape[0]
-    K = int(round(duration / sample_period))
+    K = round(duration / sample_period)
     h = sample_period / substeps
     state = np.zeros((B, 16))
     state[:, 0:3] = initial_position

@@ -1,0 +1,172 @@
+"""One job: build the Monte Carlo data, run every selected estimator, write the outputs.
+
+The output folder's layout is documented in ``docs/outputs.md`` (schema version
+:data:`SCHEMA_VERSION`).
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import subprocess
+import warnings
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from omegaconf import OmegaConf
+from tqdm.auto import tqdm
+
+from quadest.config.validate import validate
+from quadest.estimators.registry import build_estimator, estimator_parameters
+from quadest.metrics import estimator_overview, rmse_table, summarize, tidy_metrics
+from quadest.montecarlo import MonteCarloData, build_quadrotor_data
+from quadest.plotting import plot_errors, plot_truth_vs_estimate
+from quadest.runner import EstimatorResult, run_estimator
+
+SCHEMA_VERSION = 1
+
+
+def git_commit() -> str:
+    """The commit of the source tree, or ``"unknown"`` outside a git checkout."""
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True, timeout=5
+        )
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return out.stdout.strip() if out.returncode == 0 else "unknown"
+
+
+def markdown_table(frame: pd.DataFrame) -> str:
+    """A GitHub-flavoured Markdown table of ``frame`` (no index)."""
+    cols = [str(c) for c in frame.columns]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
+    for row in frame.itertuples(index=False):
+        lines.append("| " + " | ".join("" if v is None else str(v) for v in row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def failed_result(name: str, data: MonteCarloData, reason: str) -> EstimatorResult:
+    """The result of an estimator that could not run at all: every run flagged with ``reason``."""
+    B, K1, n = data.truth.shape
+    nc = data.companion_truth.shape[-1]
+    nan = np.full(B, np.nan)
+    return EstimatorResult(
+        name, np.full((B, n), np.nan), np.full((B, nc), np.nan), np.zeros(B), nan, nan.copy(),
+        np.full(K1, np.nan), np.full(K1, np.nan), np.zeros(K1), np.ones(B, dtype=bool),
+        np.zeros(B, dtype=int), dict.fromkeys(range(B), reason), float("nan"),
+        {"estimate": np.full((0, K1, n), np.nan), "std": np.full((0, K1, n), np.nan),
+         "companion": np.full((0, K1, nc), np.nan)},
+    )  # fmt: skip
+
+
+def resolve_workers(requested: int, estimators: int) -> int:
+    """Processes to run the estimators in: ``requested``, or with 0 one per estimator up to the
+    number of CPUs."""
+    if requested > 0:
+        return min(requested, estimators)
+    return max(1, min(os.cpu_count() or 1, estimators))
+
+
+def _run_one(label: str, node: dict, data: MonteCarloData, bound: float, saved_runs: int,
+             progress: bool) -> EstimatorResult:
+    """Build and run one estimator; any exception becomes a failed result with its text."""
+    try:
+        est = build_estimator(label, node, data.model)
+        return run_estimator(label, est, data, bound, saved_runs, progress)
+    except Exception as exc:  # a broken estimator is recorded, never fatal to the job
+        return failed_result(label, data, f"{type(exc).__name__}: {exc}")
+
+
+def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
+    """Validate ``cfg``, run the comparison and write every output into ``out_dir``.
+
+    Returns the JSON summary. An estimator that raises (at construction or inside a run) is
+    recorded as failed with the exception text; it does not stop the other estimators. With
+    ``workers`` ≠ 1 the estimators run in separate processes on the same data (results do not
+    depend on it: each estimator is deterministic given the data).
+    """
+    validate(cfg)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+    data = build_quadrotor_data(cfg)
+    saved_runs = min(int(cfg.output.saved_runs), int(cfg.runs))
+    nodes = {label: OmegaConf.to_container(node, resolve=True) for label, node in cfg.estimator.items()}
+    params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
+    workers = resolve_workers(int(cfg.workers), len(nodes))
+    tasks = [(label, node, data, float(cfg.divergence_bound), saved_runs, bool(cfg.progress) and workers == 1)
+             for label, node in nodes.items()]
+    if workers == 1:
+        results = [_run_one(*task) for task in tasks]
+    else:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(_run_one, *task) for task in tasks]
+            bar = tqdm(total=len(futures), desc="estimators", disable=None if cfg.progress else True, leave=False)
+            for _ in as_completed(futures):
+                bar.update()
+            bar.close()
+            results = [f.result() for f in futures]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        table = tidy_metrics(results, data, params, {"seed": int(cfg.seed), "runs": int(cfg.runs)})
+        summary_table = summarize(table)
+        overview = estimator_overview(results)
+    table.to_csv(out_dir / "metrics.csv", index=False)
+    summary_table.to_csv(out_dir / "rmse_summary.csv", index=False)
+    printed = rmse_table(summary_table)
+    (out_dir / "rmse_table.md").write_text(
+        markdown_table(printed) + "\n" + markdown_table(overview.round(4))
+    )
+    if saved_runs:
+        arrays = {"time": data.time, "truth": data.truth[:saved_runs],
+                  "companion_truth": data.companion_truth[:saved_runs]}
+        for res in results:
+            for key, value in res.saved.items():
+                arrays[f"{res.name}/{key}"] = value
+        np.savez_compressed(out_dir / "timeseries.npz", **arrays)
+        if cfg.output.figures:
+            fig_dir = out_dir / "figures"
+            fig_dir.mkdir(exist_ok=True)
+            ran = [r for r in results if r.saved["estimate"].shape[0]]
+            plot_truth_vs_estimate(data, ran, fig_dir / "truth_vs_estimate.png")
+            plot_errors(data, ran, fig_dir / "errors_3sigma.png")
+
+    summary = {
+        "schema_version": SCHEMA_VERSION,
+        "status": "ok",
+        "commit": git_commit(),
+        "overrides": list(overrides or []),
+        "labels": {**data.labels, "seed": int(cfg.seed), "runs": int(cfg.runs),
+                   "duration": float(cfg.duration), "sample_period": float(cfg.sample_period)},
+        "state_names": list(data.model.state_names),
+        "companion_names": list(data.model.companion_names),
+        "estimators": {},
+    }  # fmt: skip
+    for res, row in zip(results, overview.to_dict("records"), strict=True):
+        rows = summary_table[summary_table["estimator"] == res.name]
+        summary["estimators"][res.name] = {
+            "parameters": params[res.name],
+            "diverged": row["diverged"],
+            "failure_reasons": {str(k): v for k, v in res.reasons.items()},
+            "mean_nees": _json_float(row["mean_nees"]),
+            "mean_nis": _json_float(row["mean_nis"]),
+            "step_time_us": _json_float(row["step_time_us"]),
+            "rmse": {
+                r["state"]: {"mean": _json_float(r["rmse_mean"]), "std": _json_float(r["rmse_std"]),
+                             "quantity": r["quantity"], "unit": r["unit"]}
+                for r in rows.to_dict("records")
+            },
+        }  # fmt: skip
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    summary["_table"] = printed
+    return summary
+
+
+def _json_float(value) -> float | None:
+    value = float(value)
+    return None if np.isnan(value) else value

@@ -1,0 +1,111 @@
+"""Metrics tables of one job: the tidy per-run table and the per-state summary.
+
+RMSE convention: for each run and state, ``RMSE = sqrt(mean over steps 1..K of error²)``; the
+summary reports the mean and standard deviation of these per-run values over the runs that did
+not diverge (not the pooled ``sqrt`` of the mean squared error over all runs).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from quadest.montecarlo import MonteCarloData
+from quadest.runner import EstimatorResult
+
+PARAMETER_COLUMNS = ("alpha", "beta", "kappa")
+
+
+def tidy_metrics(
+    results: list[EstimatorResult],
+    data: MonteCarloData,
+    estimator_params: dict[str, dict],
+    run_labels: dict,
+) -> pd.DataFrame:
+    """One row per estimator × run × state (filter states, then companion values)."""
+    model = data.model
+    frames = []
+    for res in results:
+        B = res.rmse.shape[0]
+        params = estimator_params.get(res.name, {})
+        blocks = [
+            ("filter", model.state_names, model.state_units, res.rmse),
+            ("companion", model.companion_names, model.companion_units, res.companion_rmse),
+        ]
+        for quantity, names, units, values in blocks:
+            for j, (state, unit) in enumerate(zip(names, units, strict=True)):
+                frame = pd.DataFrame(
+                    {
+                        "estimator": res.name,
+                        "kind": params.get("kind", res.name),
+                        "run": np.arange(B),
+                        "state": state,
+                        "unit": unit,
+                        "quantity": quantity,
+                        "rmse": values[:, j],
+                        "diverged": res.diverged,
+                        "diverged_step": res.diverged_step,
+                        "failure_reason": [res.reasons.get(i, "") for i in range(B)],
+                        "mean_nees": res.mean_nees,
+                        "mean_nis": res.mean_nis,
+                        "step_time_us": res.step_time_us,
+                    }
+                )
+                for p in PARAMETER_COLUMNS:
+                    frame[p] = float(params[p]) if p in params else np.nan
+                frames.append(frame)
+    table = pd.concat(frames, ignore_index=True)
+    for key, value in {**data.labels, **run_labels}.items():
+        table[key] = value
+    return table
+
+
+def summarize(table: pd.DataFrame) -> pd.DataFrame:
+    """Per estimator and state: mean and std of the per-run RMSE over non-diverged runs, and the
+    number of diverged runs."""
+    ok = table[~table["diverged"]]
+    stats = ok.groupby(["estimator", "quantity", "state", "unit"], sort=False)["rmse"].agg(
+        rmse_mean="mean", rmse_std="std", runs="count"
+    )
+    diverged = (
+        table[table["diverged"]]
+        .groupby(["estimator", "quantity", "state", "unit"], sort=False)["run"]
+        .nunique()
+        .rename("diverged")
+    )
+    out = stats.join(diverged, how="outer").reset_index()
+    out["diverged"] = out["diverged"].fillna(0).astype(int)
+    out["runs"] = out["runs"].fillna(0).astype(int)
+    order = table[["estimator", "quantity", "state"]].drop_duplicates().reset_index(drop=True)
+    return order.merge(out, on=["estimator", "quantity", "state"], how="left")
+
+
+def rmse_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """The printed table: one row per state, one column per estimator, ``mean ± std``."""
+    text = summary.assign(
+        cell=[
+            "diverged" if np.isnan(m) else f"{m:.4g} ± {s:.2g}"
+            for m, s in zip(summary["rmse_mean"], summary["rmse_std"].fillna(0.0), strict=True)
+        ],
+        row=[f"{s} [{u}]" for s, u in zip(summary["state"], summary["unit"], strict=True)],
+    )
+    wide = text.pivot_table(index=["quantity", "row"], columns="estimator", values="cell", aggfunc="first", sort=False)
+    wide.columns.name = None
+    return wide.reset_index().drop(columns="quantity").rename(columns={"row": "state"})
+
+
+def estimator_overview(results: list[EstimatorResult]) -> pd.DataFrame:
+    """Per estimator: diverged runs, average NEES and NIS over runs, and time per step."""
+    rows = []
+    for res in results:
+        rows.append(
+            {
+                "estimator": res.name,
+                "diverged": int(res.diverged.sum()),
+                "runs": int(res.diverged.size),
+                "mean_nees": float(np.nanmean(res.mean_nees)) if (~res.diverged).any() else np.nan,
+                "mean_nis": float(np.nanmean(res.mean_nis)) if (~res.diverged).any() else np.nan,
+                "step_time_us": res.step_time_us,
+            }
+        )
+    return pd.DataFrame(rows)

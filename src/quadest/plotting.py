@@ -1,0 +1,76 @@
+"""Figures of one job: truth vs estimate, and estimation error with ±3σ bounds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from quadest.montecarlo import MonteCarloData
+from quadest.runner import EstimatorResult
+
+
+def _grid(count: int) -> tuple[plt.Figure, np.ndarray]:
+    cols = 3
+    rows = int(np.ceil(count / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.6 * rows), sharex=True, squeeze=False)
+    for ax in axes.flat[count:]:
+        ax.set_visible(False)
+    return fig, axes.ravel()
+
+
+def plot_truth_vs_estimate(data: MonteCarloData, results: list[EstimatorResult], path: Path, run: int = 0) -> Path:
+    """Every filter state and companion value of one run: truth and each estimator's estimate."""
+    model = data.model
+    names = list(model.state_names) + list(model.companion_names)
+    units = list(model.state_units) + list(model.companion_units)
+    truth = np.concatenate([data.truth[run], data.companion_truth[run]], axis=-1)
+    fig, axes = _grid(len(names))
+    for j, ax in enumerate(axes):
+        if j >= len(names):
+            break
+        ax.plot(data.time, truth[:, j], color="k", lw=1.6, label="truth")
+        for res in results:
+            series = np.concatenate([res.saved["estimate"][run], res.saved["companion"][run]], axis=-1)
+            ax.plot(data.time, series[:, j], lw=0.9, label=res.name)
+        ax.set_ylabel(f"{names[j]} [{units[j]}]")
+        ax.grid(alpha=0.3)
+    for ax in list(axes)[-3:]:
+        ax.set_xlabel("time [s]")
+    next(iter(axes)).legend(fontsize=7, loc="best")
+    fig.suptitle(f"Truth vs estimate, run {run}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_errors(data: MonteCarloData, results: list[EstimatorResult], path: Path, run: int = 0) -> Path:
+    """Estimation error of each filter state with the filter's ±3σ bound, one row per estimator."""
+    model = data.model
+    n = model.n
+    fig, axes = plt.subplots(len(results), n, figsize=(2.6 * n, 2.2 * len(results)), sharex=True, squeeze=False)
+    for r, res in enumerate(results):
+        err = res.saved["estimate"][run] - data.truth[run]
+        sig = 3.0 * res.saved["std"][run]
+        for j in range(n):
+            ax = axes[r, j]
+            ax.fill_between(data.time, -sig[:, j], sig[:, j], color="C0", alpha=0.2, lw=0, label="±3σ")
+            ax.plot(data.time, err[:, j], color="C3", lw=0.7, label="error")
+            ax.grid(alpha=0.3)
+            if r == 0:
+                ax.set_title(f"{model.state_names[j]} [{model.state_units[j]}]", fontsize=9)
+            if j == 0:
+                ax.set_ylabel(res.name)
+            if r == len(results) - 1:
+                ax.set_xlabel("time [s]")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(f"Estimation error and ±3σ bounds, run {run}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

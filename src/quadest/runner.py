@@ -1,0 +1,198 @@
+"""Run estimators over Monte Carlo data and accumulate their metrics step by step.
+
+For every estimator the runner keeps the companion values (thesis: integrated angles and
+positions), calls ``predict`` with the previous input and ``update`` with the current
+measurement, and accumulates per run: squared errors per state, NEES, NIS and the wall time of
+the filter calls. Full covariance histories are never stored; estimates and standard deviations
+are kept only for the first ``saved_runs`` runs (for figures and time series).
+
+A run is flagged as diverged when the estimator flags it (failed factorisation, non-finite
+numbers, an exception in a single-run plugin) or when any state error exceeds
+``divergence_bound``. A diverged run stops contributing from that step on.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from quadest.estimators.base import Estimator
+from quadest.montecarlo import MonteCarloData
+from quadest.numerics import whiten
+
+
+@dataclass
+class EstimatorResult:
+    """What one estimator achieved on one batch.
+
+    Attributes:
+        name: the estimator's label (its key under ``estimator.``).
+        sq_error_sum: (B, n) sum over steps 1..K of squared state errors.
+        companion_sq_error_sum: (B, nc) the same for the companion values.
+        steps: (B,) number of steps that counted (K unless the run diverged).
+        nees_sum, nis_sum: (B,) sums over counted steps.
+        nees_mean_t, nis_mean_t: (K+1,) averages over the runs alive at each step.
+        alive_t: (K+1,) number of runs alive at each step.
+        diverged: (B,) bool; diverged_step: (B,) first step flagged (-1 if none).
+        reasons: run → reason text.
+        step_time_us: wall time of predict + update per step per run (batch time / B).
+        saved: time series of the first runs: ``estimate``, ``std``, ``companion``.
+    """
+
+    name: str
+    sq_error_sum: np.ndarray
+    companion_sq_error_sum: np.ndarray
+    steps: np.ndarray
+    nees_sum: np.ndarray
+    nis_sum: np.ndarray
+    nees_mean_t: np.ndarray
+    nis_mean_t: np.ndarray
+    alive_t: np.ndarray
+    diverged: np.ndarray
+    diverged_step: np.ndarray
+    reasons: dict[int, str]
+    step_time_us: float
+    saved: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def rmse(self) -> np.ndarray:
+        """(B, n) per-run RMSE over time; NaN for diverged runs."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = np.sqrt(self.sq_error_sum / self.steps[:, None])
+        out[self.diverged] = np.nan
+        return out
+
+    @property
+    def companion_rmse(self) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = np.sqrt(self.companion_sq_error_sum / self.steps[:, None])
+        out[self.diverged] = np.nan
+        return out
+
+    @property
+    def mean_nees(self) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = self.nees_sum / self.steps
+        out[self.diverged] = np.nan
+        return out
+
+    @property
+    def mean_nis(self) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = self.nis_sum / self.steps
+        out[self.diverged] = np.nan
+        return out
+
+
+def _mahalanobis_sq(r: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """``|S⁻¹ r|²`` per run; NaN where the factor is not usable."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        return np.sum(whiten(factor, r) ** 2, axis=-1)
+
+
+def _covariance_factor(est: Estimator) -> np.ndarray:
+    """Lower factor of each run's covariance; NaN for runs whose covariance is not PD."""
+    if "sqrt_covariance" in est.capabilities:
+        return est.sqrt_covariance
+    P = est.covariance
+    try:
+        return np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        out = np.full_like(P, np.nan)
+        for i in range(P.shape[0]):
+            try:
+                out[i] = np.linalg.cholesky(P[i])
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def run_estimator(
+    name: str,
+    est: Estimator,
+    data: MonteCarloData,
+    divergence_bound: float,
+    saved_runs: int = 0,
+    progress: bool = False,
+) -> EstimatorResult:
+    """Filter every run of ``data`` with ``est`` and accumulate the metrics."""
+    model = data.model
+    B, K1, n = data.truth.shape
+    K = K1 - 1
+    nc = data.companion_truth.shape[-1]
+    saved_runs = min(saved_runs, B)
+    sq = np.zeros((B, n))
+    csq = np.zeros((B, nc))
+    steps = np.zeros(B)
+    nees_sum, nis_sum = np.zeros(B), np.zeros(B)
+    nees_t, nis_t, alive_t = np.full(K1, np.nan), np.full(K1, np.nan), np.zeros(K1)
+    diverged = np.zeros(B, dtype=bool)
+    diverged_step = np.full(B, -1)
+    reasons: dict[int, str] = {}
+    est_hist = np.full((saved_runs, K1, n), np.nan)
+    std_hist = np.full((saved_runs, K1, n), np.nan)
+    comp_hist = np.full((saved_runs, K1, nc), np.nan)
+
+    def flag(mask: np.ndarray, k: int, why) -> None:
+        for i in np.flatnonzero(mask & ~diverged):
+            diverged[i], diverged_step[i] = True, k
+            reasons[int(i)] = why(int(i)) if callable(why) else why
+
+    def record(k: int) -> None:
+        x = est.mean
+        P = est.covariance
+        if saved_runs:
+            est_hist[:, k] = x[:saved_runs]
+            std_hist[:, k] = np.sqrt(np.clip(np.diagonal(P[:saved_runs], axis1=-2, axis2=-1), 0, None))
+            comp_hist[:, k] = companion[:saved_runs]
+
+    elapsed = 0.0
+    t0 = time.perf_counter()
+    P0 = np.broadcast_to(data.P0, (B, n, n)).copy()
+    est.initialize(data.x0.copy(), P0)
+    elapsed += time.perf_counter() - t0
+    companion = data.companion0.copy()
+    record(0)
+    has_innovation = "innovation" in est.capabilities
+    bar = tqdm(total=K, desc=f"{name:>8s}", unit="step", disable=None if progress else True, leave=False, mininterval=0.5)
+    for k in range(1, K1):
+        next_companion = model.companion_step(companion, est.mean)
+        u_prev = model.filter_input(data.inputs[:, k - 1], companion)
+        companion = next_companion
+        u_now = model.filter_input(data.inputs[:, k], companion)
+        t0 = time.perf_counter()
+        est.predict(u_prev)
+        est.update(data.measurements[:, k], u_now)
+        elapsed += time.perf_counter() - t0
+        flag(est.failed, k, lambda i: est.failure_reasons.get(i, "flagged by the estimator"))
+
+        err = est.mean - data.truth[:, k]
+        with np.errstate(invalid="ignore"):
+            too_big = ~(np.abs(err) <= divergence_bound).all(-1)
+        flag(too_big, k, f"state error beyond divergence_bound={divergence_bound}")
+        nees = _mahalanobis_sq(err, _covariance_factor(est))
+        nis = np.full(B, np.nan)
+        if has_innovation:
+            nu, Sy = est.innovation()
+            nis = _mahalanobis_sq(nu, Sy)
+        flag(~np.isfinite(nees), k, "covariance not positive definite")
+
+        alive = ~diverged
+        sq[alive] += err[alive] ** 2
+        csq[alive] += (companion[alive] - data.companion_truth[alive, k]) ** 2
+        steps[alive] += 1
+        nees_sum[alive] += nees[alive]
+        nis_sum[alive] += nis[alive]
+        alive_t[k] = alive.sum()
+        if alive.any():
+            nees_t[k] = nees[alive].mean()
+            nis_t[k] = nis[alive].mean()
+        record(k)
+        bar.update()
+    bar.close()
+    saved = {"estimate": est_hist, "std": std_hist, "companion": comp_hist}
+    return EstimatorResult(name, sq, csq, steps, nees_sum, nis_sum, nees_t, nis_t, alive_t,
+                           diverged, diverged_step, reasons, elapsed / K / B * 1e6, saved)
