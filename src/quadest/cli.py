@@ -7,17 +7,22 @@ the per-state RMSE table and the output folder. Any key can be overridden
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
 import sys
 from pathlib import Path
 
 import hydra
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from quadest.config.paths import config_dir
 from quadest.config.schema import register_schemas
+from quadest.config.validate import validate
 from quadest.errors import ConfigError
 from quadest.job import run_job
 
@@ -33,8 +38,7 @@ def _main(cfg: DictConfig) -> None:
         summary = run_job(cfg, out_dir, list(hc.overrides.task))
     except ConfigError as exc:
         if not multirun:
-            print(f"quadest: error: {exc}", file=sys.stderr)
-            sys.exit(2)
+            _fail(str(exc))
         _record_failure(out_dir, f"ConfigError: {exc}")
         return
     except Exception as exc:  # in a sweep, one bad cell must not lose the others
@@ -57,8 +61,67 @@ def _record_failure(out_dir: Path, reason: str) -> None:
     print(f"quadest: job failed: {reason}", file=sys.stderr)
 
 
+_HYDRA_FLAGS = {
+    "-m", "--multirun", "-h", "--help", "--hydra-help", "-i", "--info", "-c", "--cfg", "-sc",
+    "--shell-completion", "--version", "-cd", "--config-dir", "-cn", "--config-name", "-cp",
+    "--config-path", "--resolve", "-p", "--package", "--experimental-rerun",
+}  # fmt: skip
+
+
+def one_line(exc: BaseException) -> str:
+    """Hydra's or OmegaConf's multi-line composition error as one line, with its cause; for a key
+    that a schema does not have, the keys it does have; for an unknown group option, the options."""
+    text = str(exc)
+    cause = exc.__cause__ or exc.__context__
+    if cause is not None and str(cause) not in text:
+        text += "\n" + str(cause)
+    keep = []
+    for line in text.splitlines():
+        text = line.strip()
+        if text.startswith(("Config search path", "provider=", "object_type=", "Set the environment")):
+            continue
+        if text.startswith("full_key:"):
+            text = f"(key {text.split(':', 1)[1].strip()})"
+        if text:
+            keep.append(text + ("," if line.startswith("\t") else ""))
+    message = " ".join(keep).rstrip(",")
+    missing = re.search(r"Could not load '([\w/]+)/([^']+)'", message)
+    if missing:
+        options = sorted(p.stem for p in (Path(config_dir()) / missing.group(1)).glob("*.yaml"))
+        message += f" Available options in '{missing.group(1)}': {', '.join(options)}"
+    schema = getattr(cause, "object_type", None) or getattr(exc, "object_type", None)
+    if schema is not None and dataclasses.is_dataclass(schema) and "not in" in message:
+        message += f"; allowed keys: {', '.join(f.name for f in dataclasses.fields(schema))}"
+    return message
+
+
+def precheck(argv: list[str]) -> None:
+    """Compose and validate a plain run's config before Hydra starts, so that a typo, a wrong
+    type or a value out of range ends with one line and exit code 2, before any work."""
+    if any(arg in _HYDRA_FLAGS or arg.startswith("--") for arg in argv):
+        return
+    overrides = [a for a in argv if not a.lstrip("+~").startswith(("hydra.", "hydra/"))]
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+            cfg = compose(config_name="config", overrides=overrides)
+        validate(cfg)
+    except ConfigError as exc:
+        _fail(str(exc))
+    except Exception as exc:  # Hydra/OmegaConf composition errors
+        _fail(one_line(exc))
+    finally:
+        GlobalHydra.instance().clear()
+
+
+def _fail(message: str) -> None:
+    print(f"quadest: error: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
 def main() -> None:
     """Console-script entry point."""
+    precheck(sys.argv[1:])
     _main()
 
 
