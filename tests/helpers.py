@@ -33,8 +33,7 @@ def smooth_model(seed: int, n: int = 4, m: int = 2, batch_size: int = 1) -> Func
     def h(x, u):
         return np.tanh(x) @ C.T + 0.1 * x[..., :m] ** 2
 
-    return FunctionalModel(f, h, random_spd(rng, n, 0.01), random_spd(rng, m, 0.1), nu=n, dt=dt,
-                           batch_size=batch_size)
+    return FunctionalModel(f, h, random_spd(rng, n, 0.01), random_spd(rng, m, 0.1), nu=n, dt=dt, batch_size=batch_size)
 
 
 def run_filter(est: Estimator, model: FilterModel, x0, P0, inputs, measurements, failures: dict | None = None):
@@ -63,8 +62,11 @@ def simulate(model: FilterModel, x0: np.ndarray, steps: int, seed: int):
     x[:, 0] = x0
     for k in range(1, steps + 1):
         x[:, k] = model.f(x[:, k - 1][:, None], u[:, k - 1])[:, 0] + rng.standard_normal((B, n)) @ LQ.T
-    z = model.h(x, u[:, 0]) if model.nu == 0 else np.stack(
-        [model.h(x[:, k][:, None], u[:, k])[:, 0] for k in range(steps + 1)], axis=1)
+    z = (
+        model.h(x, u[:, 0])
+        if model.nu == 0
+        else np.stack([model.h(x[:, k][:, None], u[:, k])[:, 0] for k in range(steps + 1)], axis=1)
+    )
     z = z + rng.standard_normal(z.shape) @ LR.T
     return x, u, z
 

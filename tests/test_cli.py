@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import compose_config
 
+from helpers import compose_config
 from quadest.config.paths import config_dir
 from quadest.job import run_job
 
@@ -22,8 +22,9 @@ SMALL = ["runs=3", "duration=0.5", "progress=false"]
 
 def quadest(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
-    return subprocess.run([sys.executable, "-m", "quadest.cli", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "quadest.cli", *args], cwd=cwd, capture_output=True, text=True, timeout=300, env=env
+    )
 
 
 def test_cli_runs_and_writes_documented_outputs(tmp_path):
@@ -32,14 +33,38 @@ def test_cli_runs_and_writes_documented_outputs(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "Per-state RMSE" in proc.stdout
     assert f"Outputs: {out}" in proc.stdout
-    for name in ("metrics.csv", "rmse_summary.csv", "rmse_table.md", "summary.json", "config.yaml",
-                 "timeseries.npz", "figures/truth_vs_estimate.png", "figures/errors_3sigma.png"):
+    for name in (
+        "metrics.csv",
+        "rmse_summary.csv",
+        "rmse_table.md",
+        "summary.json",
+        "config.yaml",
+        "timeseries.npz",
+        "figures/truth_vs_estimate.png",
+        "figures/errors_3sigma.png",
+    ):
         assert (out / name).is_file(), name
     table = pd.read_csv(out / "metrics.csv")
     assert set(table["estimator"]) == {"ekf", "ukf", "srukf"}
     assert len(table) == 3 * 3 * (6 + 6)  # estimators × runs × (filter states + companions)
-    for col in ("run", "state", "rmse", "diverged", "mean_nees", "mean_nis", "step_time_us", "alpha", "beta",
-                "kappa", "sensor", "error_scale", "scenario", "formulation", "calibrated", "seed"):
+    for col in (
+        "run",
+        "state",
+        "rmse",
+        "diverged",
+        "mean_nees",
+        "mean_nis",
+        "step_time_us",
+        "alpha",
+        "beta",
+        "kappa",
+        "sensor",
+        "error_scale",
+        "scenario",
+        "formulation",
+        "calibrated",
+        "seed",
+    ):
         assert col in table.columns, col
     summary = json.loads((out / "summary.json").read_text())
     assert summary["schema_version"] == 1 and summary["status"] == "ok"
@@ -51,8 +76,10 @@ def test_cli_works_from_any_directory(tmp_path):
     """The config tree is found by absolute path, not relative to the working directory."""
     elsewhere = tmp_path / "somewhere" / "else"
     elsewhere.mkdir(parents=True)
-    proc = quadest(["runs=1", "duration=0.1", "progress=false", "output.figures=false",
-                    f"hydra.run.dir={tmp_path / 'o'}"], elsewhere)
+    proc = quadest(
+        ["runs=1", "duration=0.1", "progress=false", "output.figures=false", f"hydra.run.dir={tmp_path / 'o'}"],
+        elsewhere,
+    )
     assert proc.returncode == 0, proc.stderr
 
 
@@ -88,17 +115,21 @@ def test_bad_input_gives_one_line_naming_the_key(tmp_path, override, key, allowe
     assert not (tmp_path / "o").exists()  # nothing ran
 
 
-GROUPS = {g: sorted(p.stem for p in (Path(config_dir()) / g).glob("*.yaml"))
-          for g in ("model", "sensor", "scenario", "estimator")}
+GROUPS = {
+    g: sorted(p.stem for p in (Path(config_dir()) / g).glob("*.yaml"))
+    for g in ("model", "sensor", "scenario", "estimator")
+}
 
 
-@pytest.mark.parametrize(("model", "sensor", "scenario"),
-                         list(itertools.product(GROUPS["model"], GROUPS["sensor"], GROUPS["scenario"])))
+@pytest.mark.parametrize(
+    ("model", "sensor", "scenario"), list(itertools.product(GROUPS["model"], GROUPS["sensor"], GROUPS["scenario"]))
+)
 def test_every_group_option_composes_and_validates(model, sensor, scenario):
     from quadest.config.validate import validate
 
-    cfg = compose_config([f"model={model}", f"sensor={sensor}", f"scenario={scenario}",
-                          f"estimator=[{','.join(GROUPS['estimator'])}]"])
+    cfg = compose_config(
+        [f"model={model}", f"sensor={sensor}", f"scenario={scenario}", f"estimator=[{','.join(GROUPS['estimator'])}]"]
+    )
     validate(cfg)
     assert set(cfg.estimator) == set(GROUPS["estimator"])
 
@@ -130,10 +161,19 @@ def test_failing_estimator_is_recorded_not_fatal(tmp_path):
     """An SR-UKF with an indefinite UT (augmented, α = 1, β = 0, κ = 3 − n, so W0(c) = −2) fails
     in run 0 of this seed; the job finishes, the other runs count, and the table reports the
     diverged run with its reason."""
-    table = small_job(tmp_path, "fail", ["model.formulation=augmented", "runs=4", "estimator=[srukf,ekf]",
-                                         "model.initial_std.correlation=0.3",
-                                         "estimator.srukf.alpha=1.0", "estimator.srukf.beta=0.0",
-                                         "estimator.srukf.kappa=-6.0"])
+    table = small_job(
+        tmp_path,
+        "fail",
+        [
+            "model.formulation=augmented",
+            "runs=4",
+            "estimator=[srukf,ekf]",
+            "model.initial_std.correlation=0.3",
+            "estimator.srukf.alpha=1.0",
+            "estimator.srukf.beta=0.0",
+            "estimator.srukf.kappa=-6.0",
+        ],
+    )
     sr = table[(table["estimator"] == "srukf") & (table["state"] == "vx")]
     assert sr["diverged"].tolist() == [True, False, False, False]
     assert sr.loc[~sr["diverged"], "rmse"].notna().all()

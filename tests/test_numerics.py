@@ -172,3 +172,14 @@ def test_weighted_mean_keeps_digits_the_direct_sum_loses():
     Y = np.concatenate([c[None], c + d, c - d])[None]
     assert np.abs(weighted_mean(Y, w)[0] - c).max() < 1e-11
     assert np.abs(np.einsum("i,bij->bj", w.wm, Y)[0] - c).max() > 1e-9
+
+
+def test_cholupdate_leaves_its_inputs_alone():
+    rng = np.random.default_rng(8)
+    for B, n in ((1, 1), (1, 3), (3, 1), (3, 4)):
+        S = random_factor(rng, B, n)
+        v = rng.standard_normal((B, n))
+        S0, v0 = S.copy(), v.copy()
+        cholupdate(S, v, 0.5)
+        np.testing.assert_array_equal(S, S0)
+        np.testing.assert_array_equal(v, v0)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import compose_config
 
+from helpers import compose_config
 from quadest.montecarlo import build_quadrotor_data, quadrotor_params, run_streams
 from quadest.quadrotor.controller import BacksteppingController, BacksteppingGains
 from quadest.quadrotor.dynamics import (
@@ -85,7 +85,7 @@ def test_elementwise_kinematics_match_matrix_forms():
     vdot = translational_accel(P, ang, v, U[:, 0])
     expected = R[:, :, 2] * U[:, :1] / P.mass - P.kt * v / P.mass - [0, 0, P.gravity]
     np.testing.assert_allclose(vdot, expected, rtol=1e-12, atol=1e-12)
-    f_b = np.einsum("bji,bj->bi", R, vdot + [0, 0, P.gravity])  # Rᵀ (v̇ + g e_z)
+    f_b = np.einsum("bji,bj->bi", R, [*vdot, 0, 0, P.gravity])  # Rᵀ (v̇ + g e_z)
     np.testing.assert_allclose(specific_force(P, ang, v, U[:, 0]), f_b, rtol=1e-10, atol=1e-10)
 
 
@@ -107,8 +107,9 @@ def test_euler_angle_accel_is_the_time_derivative_of_euler_rates():
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
 @pytest.mark.parametrize("calibrated", [True, False])
 def test_jacobians_match_finite_differences(formulation, calibrated):
-    cfg = compose_config([f"model.formulation={formulation}", f"model.calibrated={calibrated}",
-                          "runs=3", "duration=4.0"])
+    cfg = compose_config(
+        [f"model.formulation={formulation}", f"model.calibrated={calibrated}", "runs=3", "duration=4.0"]
+    )
     data = build_quadrotor_data(cfg)
     m = data.model
     k = 300  # mid-flight

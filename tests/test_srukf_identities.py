@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
-from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
 
+from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import FilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
@@ -58,8 +58,9 @@ def compare_srukf_filterpy(model, x0, P0, u, z, alpha, beta, kappa):
     estimates of both, per run, over the steps before that run was flagged."""
     sr_fail, fp_fail = {}, {}
     sr = run_filter(SRUKF(model, alpha, beta, kappa), model, x0, P0, u, z, sr_fail)
-    fp = run_filter(PerRunAdapter(model, FilterpyUKF, alpha=alpha, beta=beta, kappa=kappa), model, x0, P0, u, z,
-                    fp_fail)
+    fp = run_filter(
+        PerRunAdapter(model, FilterpyUKF, alpha=alpha, beta=beta, kappa=kappa), model, x0, P0, u, z, fp_fail
+    )
     assert sorted(sr_fail) == sorted(fp_fail)
     assert all(sr_fail[i] <= fp_fail[i] for i in sr_fail)
     for i in range(x0.shape[0]):
@@ -90,15 +91,26 @@ def test_per_point_and_vectorised_filterpy_calls_agree():
     rng = np.random.default_rng(3)
     P0 = random_spd(rng, 4, 0.5)[None]
     _, u, z = simulate(model, np.zeros((1, 4)), 50, 3)
-    a = run_filter(PerRunAdapter(model, FilterpyUKF, alpha=0.5, vectorize_points=False), model, np.zeros((1, 4)), P0, u, z)
-    b = run_filter(PerRunAdapter(model, FilterpyUKF, alpha=0.5, vectorize_points=True), model, np.zeros((1, 4)), P0, u, z)
+    a = run_filter(
+        PerRunAdapter(model, FilterpyUKF, alpha=0.5, vectorize_points=False), model, np.zeros((1, 4)), P0, u, z
+    )
+    b = run_filter(
+        PerRunAdapter(model, FilterpyUKF, alpha=0.5, vectorize_points=True), model, np.zeros((1, 4)), P0, u, z
+    )
     np.testing.assert_allclose(a[0], b[0], rtol=0, atol=1e-13)
 
 
 @pytest.fixture(scope="module", params=["thesis", "augmented"])
 def quadrotor_data(request):
-    cfg = compose_config([f"model.formulation={request.param}", "runs=2", "duration=1.2",
-                          "model.initial_std.correlation=0.3", "scenario=figure8"])
+    cfg = compose_config(
+        [
+            f"model.formulation={request.param}",
+            "runs=2",
+            "duration=1.2",
+            "model.initial_std.correlation=0.3",
+            "scenario=figure8",
+        ]
+    )
     return build_quadrotor_data(cfg)
 
 
@@ -185,8 +197,9 @@ def test_batched_srukf_equals_each_run_alone(alpha):
     xb, Pb = run_filter(SRUKF(model, alpha, 2.0, 0.0), model, x0, P0, u, z)
     for i in range(B):
         single = model.select(i)
-        xi, Pi = run_filter(SRUKF(single, alpha, 2.0, 0.0), single, x0[i : i + 1], P0[i : i + 1],
-                            u[i : i + 1], z[i : i + 1])
+        xi, Pi = run_filter(
+            SRUKF(single, alpha, 2.0, 0.0), single, x0[i : i + 1], P0[i : i + 1], u[i : i + 1], z[i : i + 1]
+        )
         assert relative(xb[:, i], xi[:, 0]) <= 1e-12
         assert relative(Pb[:, i], Pi[:, 0]) <= 1e-12
 
@@ -207,6 +220,7 @@ def test_run_that_loses_definiteness_is_flagged_and_others_unchanged():
     """Scalar x, h(x) = x², α = 1, κ = 0, β = −3: the UT gives Pyy = σ⁴(γ² − α² + β) + R
     = −3σ⁴ + R, so the downdate of eq. 5.24 must fail for σ² = 1, R = 0.01 and succeed for
     σ² = 0.01 (Pyy = 0.0097)."""
+
     def f(x, u):
         return x
 
@@ -226,8 +240,9 @@ def test_run_that_loses_definiteness_is_flagged_and_others_unchanged():
     assert np.isfinite(xb).all()
     for i in (0, 2):
         single = model.select(i)
-        xi, _ = run_filter(SRUKF(single, 1.0, -3.0, 0.0), single, x0[i : i + 1], P0[i : i + 1],
-                           u[i : i + 1], z[i : i + 1])
+        xi, _ = run_filter(
+            SRUKF(single, 1.0, -3.0, 0.0), single, x0[i : i + 1], P0[i : i + 1], u[i : i + 1], z[i : i + 1]
+        )
         np.testing.assert_array_equal(xb[:, i], xi[:, 0])
 
 

@@ -46,12 +46,16 @@ def _main(cfg: DictConfig) -> None:
             raise
         _record_failure(out_dir, f"{type(exc).__name__}: {exc}")
         return
-    print(f"\nPer-state RMSE, mean ± std over {cfg.runs} Monte Carlo runs "
-          f"(per-run RMSE over time; diverged runs excluded):")
+    print(
+        f"\nPer-state RMSE, mean ± std over {cfg.runs} Monte Carlo runs "
+        f"(per-run RMSE over time; diverged runs excluded):"
+    )
     print(summary["_table"].to_string(index=False))
     for name, est in summary["estimators"].items():
-        print(f"  {name}: {est['diverged']} diverged, mean NEES {est['mean_nees']}, "
-              f"mean NIS {est['mean_nis']}, {est['step_time_us']:.1f} us/step/run")
+        print(
+            f"  {name}: {est['diverged']} diverged, mean NEES {est['mean_nees']}, "
+            f"mean NIS {est['mean_nis']}, {est['step_time_us']:.1f} us/step/run"
+        )
     print(f"\nOutputs: {out_dir}")
 
 

@@ -71,8 +71,9 @@ def resolve_workers(requested: int, estimators: int) -> int:
     return max(1, min(os.cpu_count() or 1, estimators))
 
 
-def _run_one(label: str, node: dict, data: MonteCarloData, bound: float, saved_runs: int,
-             progress: bool) -> EstimatorResult:
+def _run_one(
+    label: str, node: dict, data: MonteCarloData, bound: float, saved_runs: int, progress: bool
+) -> EstimatorResult:
     """Build and run one estimator; any exception becomes a failed result with its text."""
     try:
         est = build_estimator(label, node, data.model)
@@ -98,8 +99,10 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     nodes = {label: OmegaConf.to_container(node, resolve=True) for label, node in cfg.estimator.items()}
     params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
     workers = resolve_workers(int(cfg.workers), len(nodes))
-    tasks = [(label, node, data, float(cfg.divergence_bound), saved_runs, bool(cfg.progress) and workers == 1)
-             for label, node in nodes.items()]
+    tasks = [
+        (label, node, data, float(cfg.divergence_bound), saved_runs, bool(cfg.progress) and workers == 1)
+        for label, node in nodes.items()
+    ]
     if workers == 1:
         results = [_run_one(*task) for task in tasks]
     else:
@@ -119,12 +122,13 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     table.to_csv(out_dir / "metrics.csv", index=False)
     summary_table.to_csv(out_dir / "rmse_summary.csv", index=False)
     printed = rmse_table(summary_table)
-    (out_dir / "rmse_table.md").write_text(
-        markdown_table(printed) + "\n" + markdown_table(overview.round(4))
-    )
+    (out_dir / "rmse_table.md").write_text(markdown_table(printed) + "\n" + markdown_table(overview.round(4)))
     if saved_runs:
-        arrays = {"time": data.time, "truth": data.truth[:saved_runs],
-                  "companion_truth": data.companion_truth[:saved_runs]}
+        arrays = {
+            "time": data.time,
+            "truth": data.truth[:saved_runs],
+            "companion_truth": data.companion_truth[:saved_runs],
+        }
         for res in results:
             for key, value in res.saved.items():
                 arrays[f"{res.name}/{key}"] = value

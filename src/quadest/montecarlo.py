@@ -83,6 +83,7 @@ def triad_spec(triad_cfg, error_scale: float) -> TriadSpec:
 
 def group_diagonal(state_names: tuple[str, ...], by_group) -> np.ndarray:
     """Per-state values from per-group settings (``velocity``, ``angle``, ``angle_rate``)."""
+
     def group(name: str) -> str:
         if name.startswith("v"):
             return "velocity"
@@ -98,10 +99,12 @@ def initial_covariance(std: np.ndarray, correlation: float) -> np.ndarray:
     return std[:, None] * C * std[None, :]
 
 
-def measurement_covariance(accel: TriadSpec, gyro: TriadSpec, sample_period: float, duration: float,
-                           inflation: float) -> np.ndarray:
+def measurement_covariance(
+    accel: TriadSpec, gyro: TriadSpec, sample_period: float, duration: float, inflation: float
+) -> np.ndarray:
     """R: white-noise variance ``σ_c²/T`` plus the random-walk drift variance at mid-run
     ``σ_bc² · duration/2`` (drift the filter does not estimate is treated as noise), per axis."""
+
     def var(t: TriadSpec) -> float:
         return t.white_noise_std(sample_period) ** 2 + t.bias_random_walk**2 * duration / 2.0
 
@@ -124,8 +127,9 @@ def build_quadrotor_data(cfg) -> MonteCarloData:
     start = np.zeros((runs, 3))
     for i, rng in enumerate(streams["start"]):
         start[i, :2] = scenario.initial_position_std * rng.standard_normal(2)
-    truth = simulate_truth(params, BacksteppingController(params, gains), scenario, start,
-                           float(cfg.duration), T, int(mcfg.truth_substeps))
+    truth = simulate_truth(
+        params, BacksteppingController(params, gains), scenario, start, float(cfg.duration), T, int(mcfg.truth_substeps)
+    )
 
     scale = float(scfg.error_scale)
     accel, gyro = triad_spec(scfg.accel, scale), triad_spec(scfg.gyro, scale)
@@ -133,12 +137,12 @@ def build_quadrotor_data(cfg) -> MonteCarloData:
     gyro_errors = draw_triad_errors(gyro, streams["gyro_errors"])
     z_acc = measure_triad(accel, accel_errors, truth.specific_force, T, streams["accel_noise"])
     z_gyro = measure_triad(gyro, gyro_errors, truth.state[..., 9:12], T, streams["gyro_noise"])
-    u = measure_rotor_speeds(truth.state[..., 12:16], int(scfg.encoder.lines),
-                             float(scfg.encoder.noise_std), T, streams["encoder"])
+    u = measure_rotor_speeds(
+        truth.state[..., 12:16], int(scfg.encoder.lines), float(scfg.encoder.noise_std), T, streams["encoder"]
+    )
 
     assumed_acc, assumed_gyro = (
-        (accel_errors, gyro_errors) if mcfg.calibrated
-        else (TriadErrors.nominal(runs), TriadErrors.nominal(runs))
+        (accel_errors, gyro_errors) if mcfg.calibrated else (TriadErrors.nominal(runs), TriadErrors.nominal(runs))
     )
     probe = QuadrotorFilterModel(params, mcfg.formulation, T, np.eye(1), np.eye(6), assumed_acc, assumed_gyro)
     Q = np.diag(group_diagonal(probe.state_names, mcfg.process_noise) ** 2)
@@ -146,17 +150,24 @@ def build_quadrotor_data(cfg) -> MonteCarloData:
     model = QuadrotorFilterModel(params, mcfg.formulation, T, Q, R, assumed_acc, assumed_gyro)
 
     x_true = model.truth_to_state(truth.state)
-    P0 = initial_covariance(group_diagonal(model.state_names, mcfg.initial_std),
-                            float(mcfg.initial_std.correlation))
+    P0 = initial_covariance(group_diagonal(model.state_names, mcfg.initial_std), float(mcfg.initial_std.correlation))
     L0 = np.linalg.cholesky(P0)
-    x0 = np.array([x_true[i, 0] + L0 @ rng.standard_normal(model.n)
-                   for i, rng in enumerate(streams["initial"])])
+    x0 = np.array([x_true[i, 0] + L0 @ rng.standard_normal(model.n) for i, rng in enumerate(streams["initial"])])
     companion_truth = model.truth_to_companion(truth.state)
     labels = {
         "model": mcfg.name, "formulation": mcfg.formulation, "calibrated": bool(mcfg.calibrated),
         "sensor": scfg.name, "error_scale": scale, "scenario": scenario.name,
         "encoder_resolution": encoder_resolution(int(scfg.encoder.lines), T) if scfg.encoder.lines else 0.0,
     }  # fmt: skip
-    return MonteCarloData(model, truth.time, x_true, companion_truth, u,
-                          np.concatenate([z_acc, z_gyro], axis=-1), x0, P0,
-                          companion_truth[:, 0].copy(), labels)
+    return MonteCarloData(
+        model,
+        truth.time,
+        x_true,
+        companion_truth,
+        u,
+        np.concatenate([z_acc, z_gyro], axis=-1),
+        x0,
+        P0,
+        companion_truth[:, 0].copy(),
+        labels,
+    )

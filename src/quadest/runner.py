@@ -157,7 +157,9 @@ def run_estimator(
     companion = data.companion0.copy()
     record(0)
     has_innovation = "innovation" in est.capabilities
-    bar = tqdm(total=K, desc=f"{name:>8s}", unit="step", disable=None if progress else True, leave=False, mininterval=0.5)
+    bar = tqdm(
+        total=K, desc=f"{name:>8s}", unit="step", disable=None if progress else True, leave=False, mininterval=0.5
+    )
     for k in range(1, K1):
         next_companion = model.companion_step(companion, est.mean)
         u_prev = model.filter_input(data.inputs[:, k - 1], companion)
@@ -194,5 +196,19 @@ def run_estimator(
         bar.update()
     bar.close()
     saved = {"estimate": est_hist, "std": std_hist, "companion": comp_hist}
-    return EstimatorResult(name, sq, csq, steps, nees_sum, nis_sum, nees_t, nis_t, alive_t,
-                           diverged, diverged_step, reasons, elapsed / K / B * 1e6, saved)
+    return EstimatorResult(
+        name,
+        sq,
+        csq,
+        steps,
+        nees_sum,
+        nis_sum,
+        nees_t,
+        nis_t,
+        alive_t,
+        diverged,
+        diverged_step,
+        reasons,
+        elapsed / K / B * 1e6,
+        saved,
+    )

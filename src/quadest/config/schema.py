@@ -23,7 +23,7 @@ class ProcessNoiseConf:
 
     velocity: float = 0.01
     angle: float = 1.0e-4
-    angle_rate: float = 0.05
+    angle_rate: float = 0.01
 
 
 @dataclass

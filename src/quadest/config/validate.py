@@ -38,8 +38,9 @@ def validate_run(cfg) -> None:
         raise ConfigError("seed", cfg.seed, "must be an integer >= 0")
     _positive("sample_period", cfg.sample_period, "must be > 0 seconds")
     if not cfg.duration >= cfg.sample_period:
-        raise ConfigError("duration", cfg.duration,
-                          f"must be at least one sample period (sample_period={cfg.sample_period})")
+        raise ConfigError(
+            "duration", cfg.duration, f"must be at least one sample period (sample_period={cfg.sample_period})"
+        )
     _positive("divergence_bound", cfg.divergence_bound)
     if cfg.workers < 0:
         raise ConfigError("workers", cfg.workers, "must be >= 0 (0: one process per estimator, up to the CPU count)")
@@ -53,13 +54,23 @@ def validate_model(cfg) -> None:
         raise ConfigError("model.name", m.name, f"one of {list(MODELS)}")
     if m.formulation not in FORMULATIONS:
         raise ConfigError("model.formulation", m.formulation, f"one of {list(FORMULATIONS)}")
-    for key in ("mass", "arm", "rotor_inertia", "thrust_factor", "drag_factor", "gravity",
-                "motor_time_constant", "rotor_speed_max", "measurement_noise_inflation"):
+    for key in (
+        "mass",
+        "arm",
+        "rotor_inertia",
+        "thrust_factor",
+        "drag_factor",
+        "gravity",
+        "motor_time_constant",
+        "rotor_speed_max",
+        "measurement_noise_inflation",
+    ):
         _positive(f"model.{key}", m[key])
     _non_negative("model.rotor_speed_min", m.rotor_speed_min)
     if not m.rotor_speed_min < m.rotor_speed_max:
-        raise ConfigError("model.rotor_speed_min", m.rotor_speed_min,
-                          f"must be below model.rotor_speed_max={m.rotor_speed_max}")
+        raise ConfigError(
+            "model.rotor_speed_min", m.rotor_speed_min, f"must be below model.rotor_speed_max={m.rotor_speed_max}"
+        )
     _positive("model.truth_substeps", m.truth_substeps, "must be an integer >= 1")
     for key in ("inertia", "translational_drag", "rotational_drag"):
         values = list(m[key])
@@ -68,14 +79,18 @@ def validate_model(cfg) -> None:
         for i, v in enumerate(values):
             (_positive if key == "inertia" else _non_negative)(f"model.{key}[{i}]", v)
     for group in ("velocity", "angle", "angle_rate"):
-        _positive(f"model.process_noise.{group}", m.process_noise[group],
-                  "must be > 0 (a standard deviation per sample)")
+        _positive(
+            f"model.process_noise.{group}", m.process_noise[group], "must be > 0 (a standard deviation per sample)"
+        )
         _positive(f"model.initial_std.{group}", m.initial_std[group], "must be > 0 (a standard deviation)")
     n = state_dimension(cfg)
     rho = m.initial_std.correlation
     if not -1.0 / (n - 1) < rho < 1.0:
-        raise ConfigError("model.initial_std.correlation", rho,
-                          f"must lie in ({-1.0 / (n - 1):.3g}, 1) for a positive-definite P0 with n={n}")
+        raise ConfigError(
+            "model.initial_std.correlation",
+            rho,
+            f"must lie in ({-1.0 / (n - 1):.3g}, 1) for a positive-definite P0 with n={n}",
+        )
     for key in ("position", "altitude", "attitude", "yaw"):
         gains = list(m.controller[key])
         if len(gains) != 2 or min(gains) <= 0:
@@ -91,8 +106,11 @@ def validate_sensor(cfg) -> None:
     for triad in ("accel", "gyro"):
         for key, value in s[triad].items():
             _non_negative(f"sensor.{triad}.{key}", value)
-        _positive(f"sensor.{triad}.white_noise", s[triad].white_noise,
-                  "must be > 0 (the filters' measurement covariance is built from it)")
+        _positive(
+            f"sensor.{triad}.white_noise",
+            s[triad].white_noise,
+            "must be > 0 (the filters' measurement covariance is built from it)",
+        )
     if s.encoder.lines < 0:
         raise ConfigError("sensor.encoder.lines", s.encoder.lines, "must be >= 0 (0 disables quantisation)")
     _non_negative("sensor.encoder.noise_std", s.encoder.noise_std)
@@ -124,8 +142,11 @@ def validate_estimators(cfg) -> None:
             if not alpha > 0:
                 raise ConfigError(f"estimator.{label}.alpha", alpha, "must be > 0 (typically 1e-4 <= alpha <= 1)")
             if not alpha**2 * (n + kappa) > 0:
-                raise ConfigError(f"estimator.{label}.kappa", kappa,
-                                  f"n + lambda = alpha^2 (n + kappa) must be > 0, so kappa > {-n} for n={n}")
+                raise ConfigError(
+                    f"estimator.{label}.kappa",
+                    kappa,
+                    f"n + lambda = alpha^2 (n + kappa) must be > 0, so kappa > {-n} for n={n}",
+                )
 
 
 def validate(cfg) -> None:

@@ -125,9 +125,7 @@ class PerRunAdapter(Estimator):
 
     def __init__(self, model: FilterModel, factory, **params) -> None:
         super().__init__(model)
-        self.filters: list[SingleRunEstimator] = [
-            factory(model.select(i), **params) for i in range(model.batch_size)
-        ]
+        self.filters: list[SingleRunEstimator] = [factory(model.select(i), **params) for i in range(model.batch_size)]
         self.capabilities = frozenset(type(self.filters[0]).capabilities) if self.filters else frozenset()
         self._reset_failures(model.batch_size)
         self._mean = np.full((model.batch_size, model.n), np.nan)

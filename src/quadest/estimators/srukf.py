@@ -92,28 +92,28 @@ class SRUKF(Estimator):
 
     def predict(self, u: np.ndarray) -> None:
         w = self.weights
-        X = sigma_points(self.x, self.S, w.gamma)                    # (5.15)
-        X_pred = self.model.f(X, u)                                  # (5.16)
-        x_pred = weighted_mean(X_pred, w)                            # (5.17)
-        self.S = self._factor(X_pred, x_pred, self.sqrt_Q)           # (5.18)-(5.19)
+        X = sigma_points(self.x, self.S, w.gamma)  # (5.15)
+        X_pred = self.model.f(X, u)  # (5.16)
+        x_pred = weighted_mean(X_pred, w)  # (5.17)
+        self.S = self._factor(X_pred, x_pred, self.sqrt_Q)  # (5.18)-(5.19)
         self.x = x_pred
         self._quarantine()
 
     def update(self, z: np.ndarray, u: np.ndarray) -> None:
         w = self.weights
-        X = sigma_points(self.x, self.S, w.gamma)                    # (5.20) redraw
-        Y = self.model.h(X, u)                                       # (5.21)
-        y_pred = weighted_mean(Y, w)                                 # (5.22)
-        Sy = self._factor(Y, y_pred, self.sqrt_R)                    # (5.23)-(5.24)
+        X = sigma_points(self.x, self.S, w.gamma)  # (5.20) redraw
+        Y = self.model.h(X, u)  # (5.21)
+        y_pred = weighted_mean(Y, w)  # (5.22)
+        Sy = self._factor(Y, y_pred, self.sqrt_R)  # (5.23)-(5.24)
         dX = X - self.x[:, None, :]
         dY = Y - y_pred[:, None, :]
-        Pxy = np.einsum("i,bij,bik->bjk", w.wc, dX, dY)              # (5.25)
-        K = kalman_gain(Pxy, Sy)                                     # (5.26)
+        Pxy = np.swapaxes(w.wc[:, None] * dX, -1, -2) @ dY  # (5.25)
+        K = kalman_gain(Pxy, Sy)  # (5.26)
         self._nu = z - y_pred
         self._Sy = Sy
-        self.x = self.x + np.einsum("bij,bj->bi", K, self._nu)       # (5.27)
-        U = K @ Sy                                                   # (5.28)
-        self.S = self._cholupdate(self.S, U, -1.0)                   # (5.29)
+        self.x = self.x + (K @ self._nu[..., None])[..., 0]  # (5.27)
+        U = K @ Sy  # (5.28)
+        self.S = self._cholupdate(self.S, U, -1.0)  # (5.29)
         self._quarantine()
 
     @property

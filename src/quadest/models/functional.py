@@ -69,8 +69,17 @@ class FunctionalModel(FilterModel):
 class LinearGaussianModel(FunctionalModel):
     """``x⁺ = A x + Bu u + v``, ``z = C x + n`` with analytic Jacobians ``A`` and ``C``."""
 
-    def __init__(self, A: np.ndarray, C: np.ndarray, Q: np.ndarray, R: np.ndarray,
-                 Bu: np.ndarray | None = None, dt: float = 1.0, batch_size: int = 1, **names) -> None:
+    def __init__(
+        self,
+        A: np.ndarray,
+        C: np.ndarray,
+        Q: np.ndarray,
+        R: np.ndarray,
+        Bu: np.ndarray | None = None,
+        dt: float = 1.0,
+        batch_size: int = 1,
+        **names,
+    ) -> None:
         A, C = np.asarray(A, dtype=float), np.asarray(C, dtype=float)
         Bu = np.zeros((A.shape[0], 0)) if Bu is None else np.asarray(Bu, dtype=float)
         self.A, self.C, self.Bu = A, C, Bu
@@ -87,5 +96,6 @@ class LinearGaussianModel(FunctionalModel):
         def jac_h(x: np.ndarray, u: np.ndarray) -> np.ndarray:
             return np.broadcast_to(C, (x.shape[0], *C.shape)).copy()
 
-        super().__init__(f, h, Q, R, nu=Bu.shape[1], dt=dt, jacobians=(jac_f, jac_h),
-                         batch_size=batch_size, name="linear", **names)
+        super().__init__(
+            f, h, Q, R, nu=Bu.shape[1], dt=dt, jacobians=(jac_f, jac_h), batch_size=batch_size, name="linear", **names
+        )

@@ -92,9 +92,7 @@ class QuadrotorFilterModel(FilterModel):
             self.companion_units = ("m",) * 3
             self.nu = 4
         self.n = len(self.state_names)
-        self.state_units = tuple(
-            "m/s" if s in _V else "rad" if s in _ANG else "rad/s" for s in self.state_names
-        )
+        self.state_units = tuple("m/s" if s in _V else "rad" if s in _ANG else "rad/s" for s in self.state_names)
         self.measurement_names = ("acc_x", "acc_y", "acc_z", "gyro_p", "gyro_q", "gyro_r")
         self.m = 6
         self.Q = np.asarray(Q, dtype=float)
@@ -133,9 +131,8 @@ class QuadrotorFilterModel(FilterModel):
 
     def _split(self, x: np.ndarray, u: np.ndarray):
         speeds = u[:, None, 0:4]
-        if self.thesis:
-            angles = np.broadcast_to(u[:, None, 4:7], (*x.shape[:-1], 3))
-            return x[..., 0:3], angles, x[..., 3:6], speeds
+        if self.thesis:  # the same angles for every point of a run: trig once per run
+            return x[..., 0:3], u[:, None, 4:7], x[..., 3:6], speeds
         return x[..., 0:3], x[..., 3:6], x[..., 6:9], speeds
 
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -73,7 +73,7 @@ def weighted_mean(Y: np.ndarray, weights: UTWeights) -> np.ndarray:
     keeps them.
     """
     Y0 = Y[..., 0, :]
-    return Y0 + np.einsum("i,...ij->...j", weights.wm[1:], Y[..., 1:, :] - Y0[..., None, :])
+    return Y0 + weights.wm[1:] @ (Y[..., 1:, :] - Y0[..., None, :])
 
 
 def unscented_transform(

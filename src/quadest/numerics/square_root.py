@@ -45,54 +45,52 @@ def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
 
     Raises:
         DowndateError: when a downdate would leave a non-positive pivot in some runs. The error's
-            ``runs`` names them; ``result`` holds the factor computed for every run, whose rows
-            for the failed runs are meaningless but finite, so a batched filter can flag the
-            failed runs and continue with the others.
+            ``runs`` names them; ``result`` holds the factor computed for every run, with the
+            input factor in place of each failed run's, so a batched filter can flag the failed
+            runs and continue with the others.
     """
-    L = np.array(S, dtype=float, copy=True)
-    x = np.array(u, dtype=float, copy=True)
-    if x.ndim == L.ndim - 1:
+    S = np.asarray(S, dtype=float)
+    x = np.asarray(u, dtype=float)
+    if x.ndim == S.ndim - 1:
         x = x[..., None]
-    if x.shape[:-1] != L.shape[:-1]:
-        raise ValueError(f"cholupdate: u of shape {np.shape(u)} does not fit S of shape {L.shape}")
+    if x.shape[:-1] != S.shape[:-1]:
+        raise ValueError(f"cholupdate: u of shape {np.shape(u)} does not fit S of shape {S.shape}")
+    # Work batch-last, (n, n, B) and (n, k, B), so that every slice below is contiguous.
+    L = np.array(np.moveaxis(S, (-2, -1), (0, 1)), order="C", copy=True)
+    x = np.moveaxis(x, (-2, -1), (0, 1)) * np.sqrt(abs(nu))
     sigma = 1.0 if nu >= 0 else -1.0
-    x *= np.sqrt(abs(nu))
-    n = L.shape[-1]
-    failed = np.zeros(L.shape[:-2], dtype=bool)
-    for j in range(x.shape[-1]):
-        v = x[..., j]
-        for k in range(n):
-            Lkk = L[..., k, k]
-            vk = v[..., k]
-            r2 = Lkk * Lkk + sigma * vk * vk
-            bad = ~((r2 > 0.0) & (Lkk > 0.0))
-            if bad.any():
-                failed |= bad
-                r2 = np.where(bad, 1.0, r2)
-                Lkk = np.where(bad, 1.0, Lkk)
-                vk = np.where(bad, 0.0, vk)
-            r = np.sqrt(r2)
-            c = r / Lkk
-            s = vk / Lkk
-            L[..., k, k] = r
-            if k + 1 < n:
-                col = (L[..., k + 1 :, k] + sigma * s[..., None] * v[..., k + 1 :]) / c[..., None]
-                L[..., k + 1 :, k] = col
-                v[..., k + 1 :] = c[..., None] * v[..., k + 1 :] - s[..., None] * col
+    n = L.shape[0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for j in range(x.shape[1]):
+            v = np.array(x[:, j])
+            for k in range(n):
+                Lkk = L[k, k]
+                vk = v[k]
+                r = np.sqrt(Lkk * Lkk + sigma * vk * vk)  # NaN where a downdate fails
+                c = r / Lkk
+                s = vk / Lkk
+                L[k, k] = r
+                if k + 1 < n:
+                    col = (L[k + 1 :, k] + (sigma * s) * v[k + 1 :]) / c
+                    L[k + 1 :, k] = col
+                    v[k + 1 :] = c * v[k + 1 :] - s * col
+    L = np.moveaxis(L, (0, 1), (-2, -1))
+    # A failed pivot (r² ≤ 0) leaves NaN, inf or a zero diagonal in that run's rows only.
+    failed = ~(np.diagonal(L, axis1=-2, axis2=-1) > 0.0).all(-1) | ~np.isfinite(L).all((-2, -1))
     if failed.any():
-        err = DowndateError(
-            "Cholesky downdate would make the covariance indefinite", np.flatnonzero(failed)
-        )
+        L = np.array(L)
+        L[failed] = S[failed]
+        err = DowndateError("Cholesky downdate would make the covariance indefinite", np.flatnonzero(failed))
         err.result = L
         raise err
-    return L
+    return np.ascontiguousarray(L)
 
 
 def _solve_lower(L: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Forward substitution ``L y = b`` for lower-triangular ``L`` (B, m, m), ``b`` (B, m, k)."""
     y = np.empty(np.broadcast_shapes(L.shape[:-2], b.shape[:-2]) + b.shape[-2:])
     for i in range(L.shape[-1]):
-        acc = b[..., i, :] - np.einsum("...j,...jk->...k", L[..., i, :i], y[..., :i, :])
+        acc = b[..., i, :] - (L[..., i : i + 1, :i] @ y[..., :i, :])[..., 0, :]
         y[..., i, :] = acc / L[..., i, i, None]
     return y
 
@@ -100,9 +98,10 @@ def _solve_lower(L: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _solve_upper_transposed(L: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Back substitution ``Lᵀ y = b`` for lower-triangular ``L`` (B, m, m), ``b`` (B, m, k)."""
     m = L.shape[-1]
+    Lt = np.swapaxes(L, -1, -2)
     y = np.empty(np.broadcast_shapes(L.shape[:-2], b.shape[:-2]) + b.shape[-2:])
     for i in range(m - 1, -1, -1):
-        acc = b[..., i, :] - np.einsum("...j,...jk->...k", L[..., i + 1 :, i], y[..., i + 1 :, :])
+        acc = b[..., i, :] - (Lt[..., i : i + 1, i + 1 :] @ y[..., i + 1 :, :])[..., 0, :]
         y[..., i, :] = acc / L[..., i, i, None]
     return y
 

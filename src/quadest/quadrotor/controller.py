@@ -43,8 +43,15 @@ class BacksteppingGains:
     max_tilt: float = 0.6
 
 
-def _backstep(z1: np.ndarray, z_dot: np.ndarray, ref_dot: np.ndarray, ref_ddot: np.ndarray,
-              drift: np.ndarray, a1: np.ndarray, a2: np.ndarray) -> np.ndarray:
+def _backstep(
+    z1: np.ndarray,
+    z_dot: np.ndarray,
+    ref_dot: np.ndarray,
+    ref_ddot: np.ndarray,
+    drift: np.ndarray,
+    a1: np.ndarray,
+    a2: np.ndarray,
+) -> np.ndarray:
     """``β U`` of the backstepping law for tracking error ``z1`` and rate ``z_dot``."""
     z2 = z_dot - ref_dot - a1 * z1
     return z1 - drift + ref_ddot - a1 * (z2 + a1 * z1) - a2 * z2
@@ -70,8 +77,7 @@ class BacksteppingController:
 
         # Translational channels: desired thrust acceleration vector t = R e_z U1 / m.
         drift = -p.kt * vel / p.mass - np.array([0.0, 0.0, p.gravity])
-        t = _backstep(ref.position - pos, vel, ref.velocity, ref.acceleration, drift,
-                      self._pos_a1, self._pos_a2)
+        t = _backstep(ref.position - pos, vel, ref.velocity, ref.acceleration, drift, self._pos_a1, self._pos_a2)
         t[:, 2] = np.maximum(t[:, 2], 0.1 * p.gravity)
 
         desired = np.broadcast_to(ref.attitude, angles.shape).copy()
@@ -96,8 +102,7 @@ class BacksteppingController:
         drift_att = matvec(w_inv_dot, omega) + matvec(rate_matrix_inv(angles), free)
         err = desired - angles
         err[:, 2] = wrap_angle(err[:, 2])
-        accel_cmd = _backstep(err, rates, ref.attitude_rate, ref.attitude_accel, drift_att,
-                              self._att_a1, self._att_a2)
+        accel_cmd = _backstep(err, rates, ref.attitude_rate, ref.attitude_accel, drift_att, self._att_a1, self._att_a2)
         torques = p.inertia_vec * matvec(rate_matrix(angles), accel_cmd)
 
         U = np.concatenate([np.maximum(thrust, 0.0)[:, None], torques], axis=-1)

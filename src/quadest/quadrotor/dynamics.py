@@ -56,13 +56,17 @@ def body_angular_accel(
 
 
 def _trig(angles: np.ndarray) -> tuple[np.ndarray, ...]:
-    return (np.sin(angles[..., 0]), np.cos(angles[..., 0]), np.sin(angles[..., 1]),
-            np.cos(angles[..., 1]), np.sin(angles[..., 2]), np.cos(angles[..., 2]))
+    return (
+        np.sin(angles[..., 0]),
+        np.cos(angles[..., 0]),
+        np.sin(angles[..., 1]),
+        np.cos(angles[..., 1]),
+        np.sin(angles[..., 2]),
+        np.cos(angles[..., 2]),
+    )
 
 
-def translational_accel(
-    params: QuadrotorParams, angles: np.ndarray, v: np.ndarray, thrust: np.ndarray
-) -> np.ndarray:
+def translational_accel(params: QuadrotorParams, angles: np.ndarray, v: np.ndarray, thrust: np.ndarray) -> np.ndarray:
     """``v̇`` (..., 3) in the earth frame: ``R(Θ) e_z U1/m − g e_z − Kt v/m``, element by element
     (the third column of ``R(Θ)`` is the body z axis)."""
     sf, cf, st, ct, sp, cp = _trig(angles)
@@ -76,9 +80,7 @@ def translational_accel(
     return out
 
 
-def specific_force(
-    params: QuadrotorParams, angles: np.ndarray, v: np.ndarray, thrust: np.ndarray
-) -> np.ndarray:
+def specific_force(params: QuadrotorParams, angles: np.ndarray, v: np.ndarray, thrust: np.ndarray) -> np.ndarray:
     """What an ideal accelerometer measures: ``f_b = Rᵀ (v̇ + g e_z) = e_z U1/m − Rᵀ Kt v / m``.
 
     Component i of ``Rᵀ d`` is column i of ``R(Θ)`` dotted with ``d``."""
@@ -118,9 +120,7 @@ def body_rates(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
     return out
 
 
-def euler_angle_accel(
-    params: QuadrotorParams, angles: np.ndarray, rates: np.ndarray, speeds: np.ndarray
-) -> np.ndarray:
+def euler_angle_accel(params: QuadrotorParams, angles: np.ndarray, rates: np.ndarray, speeds: np.ndarray) -> np.ndarray:
     """Euler-angle accelerations ``Θ̈ = (d/dt W⁻¹) ω + W⁻¹ ω̇`` (thesis eq. 5.31).
 
     ``angles`` and ``rates`` are Θ and Θ̇ (..., 3); ``speeds`` the rotor speeds (..., 4). With

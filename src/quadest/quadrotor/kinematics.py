@@ -48,9 +48,7 @@ def rate_matrix_inv(angles: np.ndarray) -> np.ndarray:
     sf, cf = np.sin(angles[..., 0]), np.cos(angles[..., 0])
     tt, sec = np.tan(angles[..., 1]), 1.0 / np.cos(angles[..., 1])
     one, zero = np.ones_like(sf), np.zeros_like(sf)
-    return _stack3x3(
-        [[one, sf * tt, cf * tt], [zero, cf, -sf], [zero, sf * sec, cf * sec]]
-    )
+    return _stack3x3([[one, sf * tt, cf * tt], [zero, cf, -sf], [zero, sf * sec, cf * sec]])
 
 
 def rate_matrix_inv_partials(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,9 +60,7 @@ def rate_matrix_inv_partials(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray
     sf, cf = np.sin(angles[..., 0]), np.cos(angles[..., 0])
     tt, sec = np.tan(angles[..., 1]), 1.0 / np.cos(angles[..., 1])
     zero = np.zeros_like(sf)
-    d_phi = _stack3x3(
-        [[zero, cf * tt, -sf * tt], [zero, -sf, -cf], [zero, cf * sec, -sf * sec]]
-    )
+    d_phi = _stack3x3([[zero, cf * tt, -sf * tt], [zero, -sf, -cf], [zero, cf * sec, -sf * sec]])
     d_theta = _stack3x3(
         [
             [zero, sf * sec**2, cf * sec**2],
@@ -78,9 +74,7 @@ def rate_matrix_inv_partials(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def skew(v: np.ndarray) -> np.ndarray:
     """Cross-product matrix ``[v]×`` (..., 3, 3) with ``[v]× w = v × w``."""
     zero = np.zeros_like(v[..., 0])
-    return _stack3x3(
-        [[zero, -v[..., 2], v[..., 1]], [v[..., 2], zero, -v[..., 0]], [-v[..., 1], v[..., 0], zero]]
-    )
+    return _stack3x3([[zero, -v[..., 2], v[..., 1]], [v[..., 2], zero, -v[..., 0]], [-v[..., 1], v[..., 0], zero]])
 
 
 def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -51,8 +51,7 @@ class TriadErrors:
     @classmethod
     def nominal(cls, batch: int) -> TriadErrors:
         """Error-free triads (what a filter that ignores the errors assumes)."""
-        return cls(np.broadcast_to(np.eye(3), (batch, 3, 3)).copy(), np.zeros((batch, 3)),
-                   np.zeros((batch, 3)))
+        return cls(np.broadcast_to(np.eye(3), (batch, 3, 3)).copy(), np.zeros((batch, 3)), np.zeros((batch, 3)))
 
     def __getitem__(self, idx) -> TriadErrors:
         return TriadErrors(self.matrix[idx], self.asymmetry[idx], self.bias[idx])
@@ -62,10 +61,13 @@ class TriadErrors:
 
         ``sgn(y) y`` is written with the sign of the real part so that the complex step works.
         """
-        extra = y.ndim - 2
-        shape = (slice(None),) + (None,) * extra
-        A, a, b = self.matrix[shape], self.asymmetry[shape], self.bias[shape]
-        return np.einsum("...ij,...j->...i", A, y) + a * np.sign(y.real) * y + b
+        shape = (slice(None),) + (None,) * (y.ndim - 2)
+        a, b = self.asymmetry[shape], self.bias[shape]
+        if y.ndim == 3:
+            linear = y @ np.swapaxes(self.matrix, -1, -2)
+        else:
+            linear = np.einsum("b...ij,b...j->b...i", self.matrix[(*shape, slice(None))], y)
+        return linear + a * np.sign(y.real) * y + b
 
     def jacobian(self, y: np.ndarray) -> np.ndarray:
         """``∂ apply / ∂y`` (B, 3, 3) at ``y`` (B, 3): ``I + S + M + diag(S± ⊙ sgn(y))``."""
