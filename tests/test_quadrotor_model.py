@@ -85,7 +85,7 @@ def test_elementwise_kinematics_match_matrix_forms():
     vdot = translational_accel(P, ang, v, U[:, 0])
     expected = R[:, :, 2] * U[:, :1] / P.mass - P.kt * v / P.mass - [0, 0, P.gravity]
     np.testing.assert_allclose(vdot, expected, rtol=1e-12, atol=1e-12)
-    f_b = np.einsum("bji,bj->bi", R, [*vdot, 0, 0, P.gravity])  # Rᵀ (v̇ + g e_z)
+    f_b = np.einsum("bji,bj->bi", R, vdot + np.array([0.0, 0.0, P.gravity]))  # Rᵀ (v̇ + g e_z)
     np.testing.assert_allclose(specific_force(P, ang, v, U[:, 0]), f_b, rtol=1e-10, atol=1e-10)
 
 

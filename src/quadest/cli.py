@@ -51,12 +51,15 @@ def _main(cfg: DictConfig) -> None:
         f"(per-run RMSE over time; diverged runs excluded):"
     )
     print(summary["_table"].to_string(index=False))
+    n, m = len(summary["state_names"]), len(summary["measurement_names"])
     for name, est in summary["estimators"].items():
-        print(
-            f"  {name}: {est['diverged']} diverged, mean NEES {est['mean_nees']}, "
-            f"mean NIS {est['mean_nis']}, {est['step_time_us']:.1f} us/step/run"
-        )
+        print(f"  {name:>8s}: {est['diverged']} of {cfg.runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
+              f"({n} dof), mean NIS {_fmt(est['mean_nis'])} ({m} dof), {_fmt(est['step_time_us'], 1)} us/step/run")
     print(f"\nOutputs: {out_dir}")
+
+
+def _fmt(value: float | None, digits: int = 2) -> str:
+    return "n/a" if value is None else f"{value:.{digits}f}"
 
 
 def _record_failure(out_dir: Path, reason: str) -> None:

@@ -149,6 +149,7 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
                    "duration": float(cfg.duration), "sample_period": float(cfg.sample_period)},
         "state_names": list(data.model.state_names),
         "companion_names": list(data.model.companion_names),
+        "measurement_names": list(data.model.measurement_names),
         "estimators": {},
     }  # fmt: skip
     for res, row in zip(results, overview.to_dict("records"), strict=True):
