@@ -62,6 +62,10 @@ def plot_errors(data: MonteCarloData, results: list[EstimatorResult], path: Path
             ax.fill_between(data.time, -sig[:, j], sig[:, j], color="C0", alpha=0.2, lw=0, label="±3σ")
             ax.plot(data.time, err[:, j], color="C3", lw=0.7, label="error")
             ax.grid(alpha=0.3)
+            settled = data.time >= 0.1 * data.time[-1]  # scale to the run, not the first transient
+            span = np.nanmax(np.concatenate([np.abs(err[settled, j]), sig[settled, j]]), initial=0.0)
+            if np.isfinite(span) and span > 0:
+                ax.set_ylim(-1.3 * span, 1.3 * span)
             if r == 0:
                 ax.set_title(f"{model.state_names[j]} [{model.state_units[j]}]", fontsize=9)
             if j == 0:
