@@ -24,6 +24,7 @@ from quadest.config.paths import config_dir
 from quadest.config.schema import register_schemas
 from quadest.config.validate import validate
 from quadest.errors import ConfigError
+from quadest.estimators.registry import discover
 from quadest.job import run_job
 
 register_schemas()
@@ -53,8 +54,10 @@ def _main(cfg: DictConfig) -> None:
     print(summary["_table"].to_string(index=False))
     n, m = len(summary["state_names"]), len(summary["measurement_names"])
     for name, est in summary["estimators"].items():
-        print(f"  {name:>8s}: {est['diverged']} of {cfg.runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
-              f"({n} dof), mean NIS {_fmt(est['mean_nis'])} ({m} dof), {_fmt(est['step_time_us'], 1)} us/step/run")
+        print(
+            f"  {name:>8s}: {est['diverged']} of {cfg.runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
+            f"({n} dof), mean NIS {_fmt(est['mean_nis'])} ({m} dof), {_fmt(est['step_time_us'], 1)} us/step/run"
+        )
     print(f"\nOutputs: {out_dir}")
 
 
@@ -94,8 +97,12 @@ def one_line(exc: BaseException) -> str:
     message = " ".join(keep).rstrip(",")
     missing = re.search(r"Could not load '([\w/]+)/([^']+)'", message)
     if missing:
-        options = sorted(p.stem for p in (Path(config_dir()) / missing.group(1)).glob("*.yaml"))
-        message += f" Available options in '{missing.group(1)}': {', '.join(options)}"
+        group, name = missing.groups()
+        problems = discover()[1] if group == "estimator" else {}
+        if name in problems:
+            return problems[name]
+        options = sorted(p.stem for p in (Path(config_dir()) / group).glob("*.yaml"))
+        message += f" Available options in '{group}': {', '.join(options)}"
     schema = getattr(cause, "object_type", None) or getattr(exc, "object_type", None)
     if schema is not None and dataclasses.is_dataclass(schema) and "not in" in message:
         message += f"; allowed keys: {', '.join(f.name for f in dataclasses.fields(schema))}"

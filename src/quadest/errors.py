@@ -20,6 +20,14 @@ class ConfigError(ValueError):
         super().__init__(f"{key}={value!r} is invalid: {allowed}")
 
 
+class PluginError(ConfigError):
+    """A selected estimator plugin cannot be used; the message names the plugin and the reason."""
+
+    def __init__(self, name: str, message: str) -> None:
+        ValueError.__init__(self, message)
+        self.key, self.value, self.allowed = "estimator", name, message
+
+
 class FilterDivergence(ArithmeticError):
     """A filter lost its numerical meaning in some Monte Carlo runs of a batch.
 

@@ -21,7 +21,7 @@ from tqdm.auto import tqdm
 
 from quadest.estimators.base import Estimator
 from quadest.montecarlo import MonteCarloData
-from quadest.numerics import whiten
+from quadest.numerics import batched_cholesky, whiten
 
 
 @dataclass
@@ -97,17 +97,7 @@ def _covariance_factor(est: Estimator) -> np.ndarray:
     """Lower factor of each run's covariance; NaN for runs whose covariance is not PD."""
     if "sqrt_covariance" in est.capabilities:
         return est.sqrt_covariance
-    P = est.covariance
-    try:
-        return np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        out = np.full_like(P, np.nan)
-        for i in range(P.shape[0]):
-            try:
-                out[i] = np.linalg.cholesky(P[i])
-            except np.linalg.LinAlgError:
-                pass
-        return out
+    return batched_cholesky(est.covariance)[0]
 
 
 def run_estimator(

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 from quadest.errors import ConfigError
-from quadest.estimators.registry import builtin_estimators
+from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
 from quadest.models.quadrotor import FORMULATIONS
 from quadest.quadrotor.scenarios import SCENARIOS
 
@@ -131,14 +131,12 @@ def validate_scenario(cfg) -> None:
 def validate_estimators(cfg) -> None:
     if not cfg.estimator:
         raise ConfigError("estimator", "[]", f"select at least one of {sorted(builtin_estimators())}")
-    registry = builtin_estimators()
+    report_plugin_problems({node.get("kind", label) for label, node in cfg.estimator.items()})
     n = state_dimension(cfg)
     for label, node in cfg.estimator.items():
-        kind = node.get("kind", label)
-        if kind not in registry:
-            raise ConfigError(f"estimator.{label}.kind", kind, f"one of {sorted(registry)}")
+        resolve(label, node)
         if "alpha" in node:
-            alpha, kappa = node.alpha, node.kappa
+            alpha, kappa = node.alpha, node.get("kappa", 0.0)
             if not alpha > 0:
                 raise ConfigError(f"estimator.{label}.alpha", alpha, "must be > 0 (typically 1e-4 <= alpha <= 1)")
             if not alpha**2 * (n + kappa) > 0:

@@ -26,6 +26,8 @@ import numpy as np
 from quadest.errors import FilterDivergence
 from quadest.models.base import FilterModel
 
+CAPABILITIES = frozenset({"innovation", "sqrt_covariance"})
+
 
 class _FailureLog:
     """Which runs of a batch failed, and why (the first reason is kept)."""
@@ -46,10 +48,17 @@ class _FailureLog:
 
 
 class Estimator(_FailureLog, ABC):
-    """A filter that advances a batch of runs: leading axis ``B`` on every array."""
+    """A filter that advances a batch of runs: leading axis ``B`` on every array.
+
+    A concrete estimator sets ``config_name`` (its name under ``conf/estimator/``) and ``Params``
+    (the dataclass of its config parameters, whose fields are its constructor's keyword
+    arguments besides ``model``).
+    """
 
     batched: ClassVar[bool] = True
     capabilities: ClassVar[frozenset[str]] = frozenset()
+    config_name: ClassVar[str | None] = None
+    Params: ClassVar[type | None] = None
 
     def __init__(self, model: FilterModel) -> None:
         self.model = model
@@ -80,6 +89,17 @@ class Estimator(_FailureLog, ABC):
         """Last innovation (B, m) and the lower factor of its covariance (B, m, m)."""
         raise AttributeError(f"{type(self).__name__} does not declare the 'innovation' capability")
 
+    def quarantine(self, mean: np.ndarray, second: np.ndarray, safe_mean: np.ndarray, safe_second: np.ndarray) -> None:
+        """Flag runs whose mean or covariance (or factor) stopped being finite, and park every
+        failed run on finite placeholder values in place, so that it cannot disturb the
+        arithmetic of the others (every batched operation works run by run)."""
+        finite = np.isfinite(mean).all(-1) & np.isfinite(second).all((-2, -1))
+        if not finite.all():
+            self.flag(np.flatnonzero(~finite), "non-finite mean or covariance")
+        if self.failed.any():
+            mean[self.failed] = safe_mean[self.failed]
+            second[self.failed] = safe_second[self.failed]
+
 
 class SingleRunEstimator(ABC):
     """A filter that works on one run: means (n,), covariances (n, n), inputs (nu,), z (m,).
@@ -89,6 +109,8 @@ class SingleRunEstimator(ABC):
     """
 
     capabilities: ClassVar[frozenset[str]] = frozenset()
+    config_name: ClassVar[str | None] = None
+    Params: ClassVar[type | None] = None
 
     def __init__(self, model: FilterModel) -> None:
         self.model = model

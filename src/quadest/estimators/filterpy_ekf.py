@@ -39,6 +39,8 @@ class FilterpyEKF(SingleRunEstimator):
     """filterpy's EKF with nonlinear propagation, on one run of a :class:`FilterModel`."""
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    config_name = "ekf"
+    Params = EKFParams
 
     def __init__(self, model: FilterModel) -> None:
         super().__init__(model)

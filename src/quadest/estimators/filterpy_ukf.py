@@ -23,6 +23,7 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from quadest.estimators.base import SingleRunEstimator
 from quadest.models.base import FilterModel
+from quadest.numerics import ut_weights
 
 
 @dataclass
@@ -55,6 +56,8 @@ class FilterpyUKF(SingleRunEstimator):
     """filterpy's UKF on one run of a :class:`FilterModel`."""
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    config_name = "ukf"
+    Params = UKFParams
 
     def __init__(
         self,
@@ -65,6 +68,7 @@ class FilterpyUKF(SingleRunEstimator):
         vectorize_points: bool = True,
     ) -> None:
         super().__init__(model)
+        ut_weights(model.n, alpha, beta, kappa)  # the same checks as the SR-UKF: α > 0, n + λ > 0
         points = MerweScaledSigmaPoints(model.n, alpha=alpha, beta=beta, kappa=kappa)
         kwargs = dict(dim_x=model.n, dim_z=model.m, dt=model.dt, hx=self._hx, fx=self._fx, points=points)
         self.kf = _PointBatchedUKF(model, **kwargs) if vectorize_points else UnscentedKalmanFilter(**kwargs)

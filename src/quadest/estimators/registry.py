@@ -1,57 +1,185 @@
-"""Name → estimator lookup, and construction of an estimator from its config node."""
+"""Finding estimators and building them from config nodes.
+
+Three sources, all behind the same contract (``docs/plugins.md``):
+
+1. **In the repository**: any class in a module of :mod:`quadest.estimators` that subclasses
+   :class:`Estimator` or :class:`SingleRunEstimator` and sets ``config_name`` and ``Params``.
+   Adding one touches no other file: the registry scans the package.
+2. **From an installed package**: an entry point in the group ``quadest.estimators`` whose name
+   is the config name and whose value is the class (``"ckf2 = mypkg.filters:CKF2"``).
+3. **From a config only**: an ``estimator.<label>`` node with ``_target_`` naming any importable
+   class that meets the contract.
+
+A plugin that fails to import, breaks the contract or reuses a built-in name never takes
+quadest down: it is reported with one line naming the plugin, and refused if selected.
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
+import inspect
+import pkgutil
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cache
+from importlib.metadata import entry_points
 from typing import Any
 
-from quadest.errors import ConfigError
-from quadest.estimators.base import Estimator, PerRunAdapter
+from quadest.errors import ConfigError, PluginError
+from quadest.estimators.base import CAPABILITIES, Estimator, PerRunAdapter, SingleRunEstimator
 from quadest.models.base import FilterModel
+
+ENTRY_POINT_GROUP = "quadest.estimators"
+RESERVED_KEYS = ("kind", "_target_")
 
 
 @dataclass(frozen=True)
 class EstimatorSpec:
-    """A registered estimator: its class and the dataclass of its config parameters."""
+    """A registered estimator: its class, the dataclass of its parameters, and where it is from."""
 
     name: str
     cls: type
     params: type
+    source: str
+
+
+def contract_problems(cls: Any) -> list[str]:
+    """What keeps ``cls`` from meeting the estimator contract (empty when it does)."""
+    if not inspect.isclass(cls):
+        return [f"{cls!r} is not a class"]
+    if not issubclass(cls, Estimator | SingleRunEstimator):
+        return ["it must subclass quadest.estimators.Estimator (batched) or SingleRunEstimator (one run)"]
+    problems = []
+    if inspect.isabstract(cls):
+        missing = sorted(getattr(cls, "__abstractmethods__", ()))
+        problems.append(f"it does not implement {', '.join(missing)}")
+    unknown = set(getattr(cls, "capabilities", frozenset())) - CAPABILITIES
+    if unknown:
+        problems.append(f"unknown capabilities {sorted(unknown)}; known: {sorted(CAPABILITIES)}")
+    params = getattr(cls, "Params", None)
+    if params is not None and not dataclasses.is_dataclass(params):
+        problems.append("its Params must be a dataclass")
+    return problems
+
+
+def _builtin_specs() -> dict[str, EstimatorSpec]:
+    import quadest.estimators as package
+
+    specs: dict[str, EstimatorSpec] = {}
+    for info in pkgutil.iter_modules(package.__path__):
+        module = importlib.import_module(f"{package.__name__}.{info.name}")
+        for _, cls in inspect.getmembers(module, inspect.isclass):
+            name = cls.__dict__.get("config_name")
+            if cls.__module__ == module.__name__ and name and not contract_problems(cls):
+                specs[name] = EstimatorSpec(name, cls, cls.Params, f"{module.__name__}.{cls.__name__}")
+    return specs
+
+
+@cache
+def discover() -> tuple[dict[str, EstimatorSpec], dict[str, str]]:
+    """All usable estimators by config name, and one-line problems of the plugins that are not."""
+    specs = _builtin_specs()
+    problems: dict[str, str] = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        where = f"entry point '{ep.name} = {ep.value}'" + (f" of {ep.dist.name}" if ep.dist else "")
+        if ep.name in specs and specs[ep.name].source.startswith("quadest."):
+            problems[ep.name] = (
+                f"estimator plugin {where} collides with the built-in estimator '{ep.name}'; rename the entry point"
+            )
+            continue
+        try:
+            cls = ep.load()
+        except Exception as exc:  # a broken third-party package must not take quadest down
+            problems[ep.name] = f"estimator plugin {where} failed to import: {type(exc).__name__}: {exc}"
+            continue
+        issues = contract_problems(cls)
+        if getattr(cls, "Params", None) is None:
+            issues.append("it must define Params, the dataclass of its config parameters")
+        if issues:
+            problems[ep.name] = f"estimator plugin {where} does not meet the contract: {'; '.join(issues)}"
+            continue
+        specs[ep.name] = EstimatorSpec(ep.name, cls, cls.Params, where)
+    return specs, problems
 
 
 def builtin_estimators() -> dict[str, EstimatorSpec]:
-    """The estimators shipped with quadest, by config name."""
-    from quadest.estimators.filterpy_ekf import EKFParams, FilterpyEKF
-    from quadest.estimators.filterpy_ukf import FilterpyUKF, UKFParams
-    from quadest.estimators.srukf import SRUKF, SRUKFParams
+    """Every usable estimator by config name: the package's own and the installed plugins'."""
+    return discover()[0]
 
-    return {
-        "ekf": EstimatorSpec("ekf", FilterpyEKF, EKFParams),
-        "ukf": EstimatorSpec("ukf", FilterpyUKF, UKFParams),
-        "srukf": EstimatorSpec("srukf", SRUKF, SRUKFParams),
-    }
+
+_warned: set[str] = set()
+
+
+def report_plugin_problems(selected: set[str]) -> None:
+    """Refuse a selected broken plugin; mention the others once per process on stderr."""
+    specs, problems = discover()
+    for name, message in problems.items():
+        if name in selected and name not in specs:
+            raise PluginError(name, message)
+        if message not in _warned:
+            _warned.add(message)
+            print(f"quadest: warning: {message}", file=sys.stderr)
 
 
 def estimator_parameters(node: Mapping[str, Any]) -> dict[str, Any]:
-    """The constructor keyword arguments of an estimator config node (everything but ``kind``)."""
-    return {k: v for k, v in node.items() if k != "kind"}
+    """The constructor keyword arguments of an estimator config node."""
+    return {k: v for k, v in node.items() if k not in RESERVED_KEYS}
+
+
+def resolve(label: str, node: Mapping[str, Any]) -> tuple[type, dict[str, Any]]:
+    """The class and checked parameters of config node ``estimator.<label>``.
+
+    Raises:
+        ConfigError: unknown kind, a ``_target_`` that is not an importable class meeting the
+            contract, or parameters the estimator does not take.
+    """
+    params = estimator_parameters(node)
+    if "_target_" in node:
+        target = node["_target_"]
+        try:
+            module, _, attr = str(target).rpartition(".")
+            cls = getattr(importlib.import_module(module), attr)
+        except Exception as exc:
+            raise ConfigError(
+                f"estimator.{label}._target_", target, f"an importable class ({type(exc).__name__}: {exc})"
+            ) from None
+        issues = contract_problems(cls)
+        if issues:
+            raise ConfigError(
+                f"estimator.{label}._target_",
+                target,
+                f"a class meeting the estimator contract (docs/plugins.md): {'; '.join(issues)}",
+            )
+        schema = getattr(cls, "Params", None)
+    else:
+        specs, problems = discover()
+        kind = node.get("kind", label)
+        if kind not in specs:
+            raise ConfigError(f"estimator.{label}.kind", kind, problems.get(kind, f"one of {sorted(specs)}"))
+        cls, schema = specs[kind].cls, specs[kind].params
+    if schema is not None:
+        fields = {f.name for f in dataclasses.fields(schema)} - set(RESERVED_KEYS)
+        unknown = sorted(set(params) - fields)
+        if unknown:
+            raise ConfigError(
+                f"estimator.{label}.{unknown[0]}",
+                params[unknown[0]],
+                f"{cls.__name__} takes {sorted(fields) or 'no parameters'}",
+            )
+    return cls, params
+
+
+def make_estimator(cls: type, model: FilterModel, params: Mapping[str, Any]) -> Estimator:
+    """An instance behind the batched interface: a batch-capable class directly, a single-run
+    class wrapped in :class:`PerRunAdapter`."""
+    if issubclass(cls, Estimator):
+        return cls(model, **params)
+    return PerRunAdapter(model, cls, **params)
 
 
 def build_estimator(label: str, node: Mapping[str, Any], model: FilterModel) -> Estimator:
-    """Construct the estimator of config node ``estimator.<label>`` for a model bound to a batch.
-
-    A batch-capable class is constructed directly; a single-run class is wrapped in
-    :class:`PerRunAdapter`.
-    """
-    registry = builtin_estimators()
-    kind = node.get("kind", label)
-    if kind not in registry:
-        raise ConfigError(f"estimator.{label}.kind", kind, f"one of {sorted(registry)}")
-    spec = registry[kind]
-    fields = {f.name for f in dataclasses.fields(spec.params)} - {"kind"}
-    params = {k: v for k, v in estimator_parameters(node).items() if k in fields}
-    if getattr(spec.cls, "batched", False):
-        return spec.cls(model, **params)
-    return PerRunAdapter(model, spec.cls, **params)
+    """Construct the estimator of config node ``estimator.<label>`` for a model bound to a batch."""
+    cls, params = resolve(label, node)
+    return make_estimator(cls, model, params)

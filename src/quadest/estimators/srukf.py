@@ -47,6 +47,8 @@ class SRUKF(Estimator):
     """
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "sqrt_covariance"})
+    config_name = "srukf"
+    Params = SRUKFParams
 
     def __init__(self, model: FilterModel, alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0) -> None:
         super().__init__(model)
@@ -71,16 +73,6 @@ class SRUKF(Estimator):
             self.flag(err.runs, err.reason)
             return err.result
 
-    def _quarantine(self) -> None:
-        """Flag runs whose numbers stopped being finite, and park every failed run on finite
-        placeholder values so that it cannot disturb the arithmetic of the others."""
-        finite = np.isfinite(self.x).all(-1) & np.isfinite(self.S).all((-2, -1))
-        if not finite.all():
-            self.flag(np.flatnonzero(~finite), "non-finite mean or covariance")
-        if self.failed.any():
-            self.x[self.failed] = self._x_safe[self.failed]
-            self.S[self.failed] = self._S_safe[self.failed]
-
     def _factor(self, points: np.ndarray, mean: np.ndarray, sqrt_noise: np.ndarray) -> np.ndarray:
         """qr{[√W1(c)(χ_1:2n − mean), √noise]} then cholupdate with χ_0 − mean by W0(c)
         (eqs 5.18–5.19 and 5.23–5.24)."""
@@ -97,7 +89,7 @@ class SRUKF(Estimator):
         x_pred = weighted_mean(X_pred, w)  # (5.17)
         self.S = self._factor(X_pred, x_pred, self.sqrt_Q)  # (5.18)-(5.19)
         self.x = x_pred
-        self._quarantine()
+        self.quarantine(self.x, self.S, self._x_safe, self._S_safe)
 
     def update(self, z: np.ndarray, u: np.ndarray) -> None:
         w = self.weights
@@ -114,7 +106,7 @@ class SRUKF(Estimator):
         self.x = self.x + (K @ self._nu[..., None])[..., 0]  # (5.27)
         U = K @ Sy  # (5.28)
         self.S = self._cholupdate(self.S, U, -1.0)  # (5.29)
-        self._quarantine()
+        self.quarantine(self.x, self.S, self._x_safe, self._S_safe)
 
     @property
     def mean(self) -> np.ndarray:

@@ -7,8 +7,16 @@ Thesis (seed 000) eqs 5.1–5.9; the same scaling as van der Merwe's scaled UT, 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+
+
+class Weights(Protocol):
+    """Any set of mean and covariance weights (a UT, a cubature rule, ...)."""
+
+    wm: np.ndarray
+    wc: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -64,7 +72,7 @@ def sigma_points(x: np.ndarray, S: np.ndarray, gamma: float) -> np.ndarray:
     return np.concatenate([xc, xc + cols, xc - cols], axis=-2)
 
 
-def weighted_mean(Y: np.ndarray, weights: UTWeights) -> np.ndarray:
+def weighted_mean(Y: np.ndarray, weights: Weights) -> np.ndarray:
     """``Σ Wi(m) Yi`` (eqs 5.8, 5.17, 5.22) for ``Y`` (B, 2n+1, m), computed as
     ``Y0 + Σ_{i≥1} Wi(m) (Yi − Y0)``.
 
@@ -77,17 +85,18 @@ def weighted_mean(Y: np.ndarray, weights: UTWeights) -> np.ndarray:
 
 
 def unscented_transform(
-    Y: np.ndarray, weights: UTWeights, noise_cov: np.ndarray | None = None
+    Y: np.ndarray, weights: Weights, noise_cov: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Mean and covariance of transformed sigma points (eqs 5.8–5.9), covariance form.
 
-    ``Y`` is (B, 2n+1, m). Returns the mean (B, m) and covariance (B, m, m), plus ``noise_cov``
+    ``Y`` is (B, L, m) with one row per weight (2n+1 for the UT; any rule with ``wm``, ``wc``).
+    Returns the mean (B, m) and covariance (B, m, m), plus ``noise_cov``
     when given. The square-root filter does not use this; it is the reference the square-root
     form must equal, and the building block of covariance-form sigma-point filters.
     """
     mean = weighted_mean(Y, weights)
     d = Y - mean[..., None, :]
-    cov = np.einsum("i,...ij,...ik->...jk", weights.wc, d, d)
+    cov = np.swapaxes(weights.wc[:, None] * d, -1, -2) @ d
     if noise_cov is not None:
         cov = cov + noise_cov
     return mean, cov

@@ -86,6 +86,22 @@ def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
     return np.ascontiguousarray(L)
 
 
+def batched_cholesky(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lower Cholesky factors of a batch (B, n, n) and a mask of the runs that are not positive
+    definite (their factor is NaN). One LAPACK sweep when every run is fine."""
+    try:
+        return np.linalg.cholesky(P), np.zeros(P.shape[0], dtype=bool)
+    except np.linalg.LinAlgError:
+        out = np.full_like(P, np.nan)
+        failed = np.zeros(P.shape[0], dtype=bool)
+        for i in range(P.shape[0]):
+            try:
+                out[i] = np.linalg.cholesky(P[i])
+            except np.linalg.LinAlgError:
+                failed[i] = True
+        return out, failed
+
+
 def _solve_lower(L: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Forward substitution ``L y = b`` for lower-triangular ``L`` (B, m, m), ``b`` (B, m, k)."""
     y = np.empty(np.broadcast_shapes(L.shape[:-2], b.shape[:-2]) + b.shape[-2:])

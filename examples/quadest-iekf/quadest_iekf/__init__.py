@@ -1,0 +1,1 @@
+"""Example quadest plugin: an iterated extended Kalman filter."""

@@ -1,0 +1,219 @@
+"""The estimator plugin contract: conformance of every built-in, the CKF example, config-only
+plugins, an external package installed beside quadest, and the errors a plugin author meets."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
+from quadest.estimators.base import PerRunAdapter
+from quadest.estimators.ckf import CKF
+from quadest.estimators.filterpy_ukf import FilterpyUKF
+from quadest.estimators.registry import builtin_estimators
+from quadest.job import run_job
+from quadest.montecarlo import build_quadrotor_data
+from quadest.testing import check_estimator
+from target_plugin import Crashes, LinearizedKF
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "quadest-iekf"
+BAD_UT = [{"alpha": 0.0}, {"alpha": -1.0}, {"alpha": 1.0, "kappa": -10.0}]
+
+
+@pytest.mark.parametrize("name", sorted(builtin_estimators()))
+def test_every_builtin_estimator_passes_conformance(name):
+    spec = builtin_estimators()[name]
+    ut = "alpha" in {f for f in spec.params.__dataclass_fields__}
+    check_estimator(spec.cls, params={"alpha": 0.5} if ut else {}, bad_params=BAD_UT if ut else [])
+
+
+def test_conformance_catches_a_wrong_filter():
+    class Overconfident(LinearizedKF):
+        def update(self, z, u):
+            super().update(z, u)
+            self.P = 0.5 * self.P
+
+    with pytest.raises(AssertionError, match="differs from the Kalman filter"):
+        check_estimator(Overconfident)
+    with pytest.raises(AssertionError, match="were accepted"):
+        check_estimator(LinearizedKF, bad_params=[{"inflation": 2.0}])
+    check_estimator(LinearizedKF, bad_params=[{"inflation": 0.5}])
+
+
+def test_ckf_equals_ukf_with_alpha_one_beta_zero_kappa_zero():
+    """Arasaratnam & Haykin 2009: the 3rd-degree CKF is the UKF with α = 1, β = 0, κ = 0."""
+    model = smooth_model(21)
+    rng = np.random.default_rng(21)
+    P0 = random_spd(rng, 4, 0.5)[None]
+    x, u, z = simulate(model, rng.standard_normal((1, 4)), 100, 21)
+    a = run_filter(CKF(model), model, x[:, 0], P0, u, z)
+    b = run_filter(PerRunAdapter(model, FilterpyUKF, alpha=1.0, beta=0.0, kappa=0.0), model, x[:, 0], P0, u, z)
+    for got, ref in zip(a, b, strict=True):
+        assert np.abs(got - ref).max() / np.abs(ref).max() <= 1e-9
+
+
+def test_ckf_equals_ukf_on_the_quadrotor():
+    data = build_quadrotor_data(compose_config(["runs=2", "duration=1.0", "model.formulation=augmented"]))
+    m = data.model
+    u = np.stack([m.filter_input(data.inputs[:, k], data.companion_truth[:, k]) for k in range(data.time.size)], 1)
+    P0 = np.broadcast_to(data.P0, (2, m.n, m.n))
+    a = run_filter(CKF(m), m, data.x0, P0, u, data.measurements)
+    b = run_filter(PerRunAdapter(m, FilterpyUKF, alpha=1.0, beta=0.0, kappa=0.0), m, data.x0, P0, u, data.measurements)
+    assert np.abs(a[0] - b[0]).max() / np.abs(b[0]).max() <= 1e-9
+
+
+def job_table(tmp_path: Path, overrides: list[str]) -> pd.DataFrame:
+    cfg = compose_config(["runs=3", "duration=0.3", "progress=false", "output.figures=false", "workers=1", *overrides])
+    run_job(cfg, tmp_path / "job")
+    return pd.read_csv(tmp_path / "job" / "metrics.csv")
+
+
+def test_config_only_plugin_by_target(tmp_path):
+    table = job_table(
+        tmp_path,
+        ["estimator=[srukf]", "+estimator.mine._target_=target_plugin.LinearizedKF", "+estimator.mine.inflation=1.0"],
+    )
+    assert set(table["estimator"]) == {"srukf", "mine"}
+    assert not table["diverged"].any()
+
+
+@pytest.mark.parametrize(
+    ("target", "extra", "expected"),
+    [
+        ("no_such_module.Filter", [], "an importable class"),
+        ("target_plugin.NotAnEstimator", [], "must subclass"),
+        ("target_plugin.LinearizedKF", ["+estimator.mine.inflaton=1.0"], "takes ['inflation']"),
+    ],
+)
+def test_config_only_plugin_errors_name_the_problem(tmp_path, target, extra, expected):
+    from quadest.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"estimator\.mine") as info:
+        job_table(tmp_path, ["estimator=[srukf]", f"+estimator.mine._target_={target}", *extra])
+    assert expected in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_plugin_that_raises_marks_only_its_run(tmp_path):
+    Crashes.created = 0
+    table = job_table(tmp_path, ["estimator=[srukf]", "+estimator.boom._target_=target_plugin.Crashes"])
+    boom = table[(table["estimator"] == "boom") & (table["state"] == "vx")]
+    assert boom["diverged"].tolist() == [False, True, False]
+    assert "RuntimeError: plugin exploded" in boom["failure_reason"].iloc[1]
+    assert not table[table["estimator"] == "srukf"]["diverged"].any()
+
+
+def quadest(args: list[str], cwd: Path, pythonpath: Path) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(pythonpath), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run(
+        [sys.executable, "-m", "quadest.cli", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300
+    )
+
+
+@pytest.fixture(scope="module")
+def installed_example(tmp_path_factory) -> Path:
+    """The example package installed into a private directory (put on PYTHONPATH), so the test
+    environment itself is not modified."""
+    target = tmp_path_factory.mktemp("site")
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--no-deps",
+            "--no-build-isolation",
+            "--target",
+            str(target),
+            str(EXAMPLE),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return target
+
+
+def test_external_package_runs_a_comparison(installed_example, tmp_path):
+    out = tmp_path / "run"
+    proc = quadest(
+        [
+            "estimator=[srukf,iekf]",
+            "runs=2",
+            "duration=0.5",
+            "progress=false",
+            "output.figures=false",
+            "estimator.iekf.iterations=2",
+            f"hydra.run.dir={out}",
+        ],
+        tmp_path,
+        installed_example,
+    )
+    assert proc.returncode == 0, proc.stderr
+    table = pd.read_csv(out / "metrics.csv")
+    assert set(table["estimator"]) == {"srukf", "iekf"}
+    assert not table["diverged"].any()
+
+
+def test_external_package_passes_conformance(installed_example, tmp_path):
+    code = (
+        "from quadest.testing import check_estimator\n"
+        "from quadest_iekf.filter import IteratedEKF\n"
+        "check_estimator(IteratedEKF, bad_params=[{'iterations': 0}])\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(installed_example)}
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+
+
+@pytest.fixture(scope="module")
+def broken_plugins(tmp_path_factory) -> Path:
+    """A fake installed distribution whose entry points collide, fail to import, or break the
+    contract."""
+    site = tmp_path_factory.mktemp("broken")
+    info = site / "fake_plugins-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: fake-plugins\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[quadest.estimators]\nsrukf = json:JSONDecoder\nbroken = no_such_module_xyz:Filter\n"
+        "notafilter = json:JSONDecoder\n"
+    )
+    return site
+
+
+@pytest.mark.parametrize(
+    ("name", "expected"),
+    [("broken", "failed to import: ModuleNotFoundError"), ("notafilter", "does not meet the contract")],
+)
+def test_selecting_a_broken_plugin_gives_one_line(broken_plugins, tmp_path, name, expected):
+    proc = quadest([f"estimator=[{name}]", f"hydra.run.dir={tmp_path / 'o'}"], tmp_path, broken_plugins)
+    assert proc.returncode == 2
+    errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("quadest: error:")]
+    assert len(errors) == 1 and f"'{name} = " in errors[0] and "fake-plugins" in errors[0] and expected in errors[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_broken_plugins_do_not_stop_other_runs(broken_plugins, tmp_path):
+    proc = quadest(
+        [
+            "estimator=[srukf]",
+            "runs=1",
+            "duration=0.1",
+            "progress=false",
+            "output.figures=false",
+            f"hydra.run.dir={tmp_path / 'o'}",
+        ],
+        tmp_path,
+        broken_plugins,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "collides with the built-in estimator 'srukf'" in proc.stderr
+    assert proc.stderr.count("quadest: warning:") == 3
