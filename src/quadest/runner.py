@@ -57,34 +57,34 @@ class EstimatorResult:
     step_time_us: float
     saved: dict[str, np.ndarray] = field(default_factory=dict)
 
+    def _per_run(self, totals: np.ndarray, root: bool = False) -> np.ndarray:
+        """Time averages of per-run sums (square-rooted for RMSE); NaN for diverged runs."""
+        steps = self.steps.reshape(self.steps.shape + (1,) * (totals.ndim - 1))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = totals / steps
+        out = np.sqrt(out) if root else out
+        out[self.diverged] = np.nan
+        return out
+
     @property
     def rmse(self) -> np.ndarray:
         """(B, n) per-run RMSE over time; NaN for diverged runs."""
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out = np.sqrt(self.sq_error_sum / self.steps[:, None])
-        out[self.diverged] = np.nan
-        return out
+        return self._per_run(self.sq_error_sum, root=True)
 
     @property
     def companion_rmse(self) -> np.ndarray:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out = np.sqrt(self.companion_sq_error_sum / self.steps[:, None])
-        out[self.diverged] = np.nan
-        return out
+        """(B, nc) per-run RMSE of the companion values."""
+        return self._per_run(self.companion_sq_error_sum, root=True)
 
     @property
     def mean_nees(self) -> np.ndarray:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out = self.nees_sum / self.steps
-        out[self.diverged] = np.nan
-        return out
+        """(B,) per-run time-average NEES."""
+        return self._per_run(self.nees_sum)
 
     @property
     def mean_nis(self) -> np.ndarray:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out = self.nis_sum / self.steps
-        out[self.diverged] = np.nan
-        return out
+        """(B,) per-run time-average NIS (NaN without the innovation capability)."""
+        return self._per_run(self.nis_sum)
 
 
 def _mahalanobis_sq(r: np.ndarray, factor: np.ndarray) -> np.ndarray:
