@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
+import pickle
 import subprocess
 import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -21,9 +22,11 @@ from tqdm.auto import tqdm
 
 from quadest.config.validate import validate
 from quadest.estimators.registry import build_estimator, estimator_parameters
-from quadest.metrics import estimator_overview, rmse_table, summarize, tidy_metrics
-from quadest.montecarlo import MonteCarloData, build_quadrotor_data
-from quadest.plotting import plot_errors, plot_truth_vs_estimate
+from quadest.metrics import estimator_overview, floor_table, rmse_table, summarize, tidy_metrics
+from quadest.models.registry import build_data
+from quadest.montecarlo import MonteCarloData
+from quadest.pcrlb import pcrlb_variances
+from quadest.plotting import plot_consistency, plot_errors, plot_rmse_vs_time, plot_truth_vs_estimate
 from quadest.runner import EstimatorResult, run_estimator
 
 SCHEMA_VERSION = 1
@@ -55,11 +58,13 @@ def failed_result(name: str, data: MonteCarloData, reason: str) -> EstimatorResu
     nc = data.companion_truth.shape[-1]
     nan = np.full(B, np.nan)
     return EstimatorResult(
-        name, np.full((B, n), np.nan), np.full((B, nc), np.nan), np.zeros(B), nan, nan.copy(),
-        np.full(K1, np.nan), np.full(K1, np.nan), np.zeros(K1), np.ones(B, dtype=bool),
-        np.zeros(B, dtype=int), dict.fromkeys(range(B), reason), float("nan"),
-        {"estimate": np.full((0, K1, n), np.nan), "std": np.full((0, K1, n), np.nan),
-         "companion": np.full((0, K1, nc), np.nan)},
+        name=name, sq_error_sum=np.full((B, n), np.nan), companion_sq_error_sum=np.full((B, nc), np.nan),
+        steps=np.zeros(B), nees_sum=nan, nis_sum=nan.copy(), nees_mean_t=np.full(K1, np.nan),
+        nis_mean_t=np.full(K1, np.nan), sq_error_t=np.zeros((K1, n)), alive_t=np.zeros(K1),
+        diverged=np.ones(B, dtype=bool), diverged_step=np.zeros(B, dtype=int), reasons=dict.fromkeys(range(B), reason),
+        step_time_us=float("nan"),
+        saved={"estimate": np.full((0, K1, n), np.nan), "std": np.full((0, K1, n), np.nan),
+               "companion": np.full((0, K1, nc), np.nan)},
     )  # fmt: skip
 
 
@@ -69,6 +74,15 @@ def resolve_workers(requested: int, estimators: int) -> int:
     if requested > 0:
         return min(requested, estimators)
     return max(1, min(os.cpu_count() or 1, estimators))
+
+
+def _picklable(data: MonteCarloData) -> bool:
+    """Whether the data can go to worker processes (a model built from closures cannot)."""
+    try:
+        pickle.dumps(data)
+    except (pickle.PicklingError, AttributeError, TypeError):
+        return False
+    return True
 
 
 def _run_one(
@@ -94,11 +108,11 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
-    data = build_quadrotor_data(cfg)
+    data = build_data(cfg)
     saved_runs = min(int(cfg.output.saved_runs), int(cfg.runs))
     nodes = {label: OmegaConf.to_container(node, resolve=True) for label, node in cfg.estimator.items()}
     params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
-    workers = resolve_workers(int(cfg.workers), len(nodes))
+    workers = resolve_workers(int(cfg.workers), len(nodes)) if _picklable(data) else 1
     tasks = [
         (label, node, data, float(cfg.divergence_bound), saved_runs, bool(cfg.progress) and workers == 1)
         for label, node in nodes.items()
@@ -117,8 +131,11 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         table = tidy_metrics(results, data, params, {"seed": int(cfg.seed), "runs": int(cfg.runs)})
-        summary_table = summarize(table)
-        overview = estimator_overview(results)
+        bound = pcrlb_variances(data)
+        summary_table = summarize(table).merge(
+            floor_table(results, data, bound), on=["estimator", "quantity", "state"], how="left"
+        )
+        overview = estimator_overview(results, data.model.n, data.model.m)
     table.to_csv(out_dir / "metrics.csv", index=False)
     summary_table.to_csv(out_dir / "rmse_summary.csv", index=False)
     printed = rmse_table(summary_table)
@@ -139,6 +156,8 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
             ran = [r for r in results if r.saved["estimate"].shape[0]]
             plot_truth_vs_estimate(data, ran, fig_dir / "truth_vs_estimate.png")
             plot_errors(data, ran, fig_dir / "errors_3sigma.png")
+            plot_rmse_vs_time(data, results, bound, fig_dir / "rmse_vs_time.png")
+            plot_consistency(data, results, fig_dir / "consistency.png")
 
     summary = {
         "schema_version": SCHEMA_VERSION,
@@ -159,10 +178,13 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
             "diverged": row["diverged"],
             "failure_reasons": {str(k): v for k, v in res.reasons.items()},
             "mean_nees": _json_float(row["mean_nees"]),
+            "nees_in_band": _json_float(row["nees_in_band"]),
             "mean_nis": _json_float(row["mean_nis"]),
+            "nis_in_band": _json_float(row["nis_in_band"]),
             "step_time_us": _json_float(row["step_time_us"]),
             "rmse": {
                 r["state"]: {"mean": _json_float(r["rmse_mean"]), "std": _json_float(r["rmse_std"]),
+                             "pooled": _json_float(r["pooled_rmse"]), "pcrlb": _json_float(r["pcrlb"]),
                              "quantity": r["quantity"], "unit": r["unit"]}
                 for r in rows.to_dict("records")
             },

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from quadest.consistency import fraction_inside
 from quadest.montecarlo import MonteCarloData
 from quadest.runner import EstimatorResult
 
@@ -80,8 +81,33 @@ def summarize(table: pd.DataFrame) -> pd.DataFrame:
     return order.merge(out, on=["estimator", "quantity", "state"], how="left")
 
 
+def floor_table(results: list[EstimatorResult], data: MonteCarloData, bound: np.ndarray) -> pd.DataFrame:
+    """Per estimator and filter state: the pooled RMSE over runs and steps 1..K
+    (``sqrt`` of the mean squared error over the live runs) and the PCRLB floor
+    ``sqrt(mean_k diag J_k⁻¹)``. The bound limits the pooled MSE, so that is the column to set
+    against it (a mean of per-run RMSEs can sit slightly below it by Jensen's inequality)."""
+    floor = np.sqrt(bound[1:].mean(axis=0))
+    rows = []
+    for res in results:
+        live = res.alive_t[1:].sum()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            pooled = np.sqrt(res.sq_error_t[1:].sum(axis=0) / live) if live else np.full(floor.shape, np.nan)
+        for j, state in enumerate(data.model.state_names):
+            rows.append(
+                {
+                    "estimator": res.name,
+                    "quantity": "filter",
+                    "state": state,
+                    "pooled_rmse": pooled[j],
+                    "pcrlb": floor[j],
+                }
+            )
+    return pd.DataFrame(rows)
+
+
 def rmse_table(summary: pd.DataFrame) -> pd.DataFrame:
-    """The printed table: one row per state, one column per estimator, ``mean ± std``."""
+    """The printed table: one row per state, one column per estimator, ``mean ± std``, and the
+    PCRLB floor of each filter state."""
     text = summary.assign(
         cell=[
             "diverged" if np.isnan(m) else f"{m:.4g} ± {s:.2g}"
@@ -91,20 +117,30 @@ def rmse_table(summary: pd.DataFrame) -> pd.DataFrame:
     )
     wide = text.pivot_table(index=["quantity", "row"], columns="estimator", values="cell", aggfunc="first", sort=False)
     wide.columns.name = None
+    if "pcrlb" in summary:
+        floors = text.drop_duplicates("row").set_index(["quantity", "row"])["pcrlb"]
+        wide["PCRLB"] = [f"{v:.4g}" if np.isfinite(v) else "-" for v in floors.reindex(wide.index)]
     return wide.reset_index().drop(columns="quantity").rename(columns={"row": "state"})
 
 
-def estimator_overview(results: list[EstimatorResult]) -> pd.DataFrame:
-    """Per estimator: diverged runs, average NEES and NIS over runs, and time per step."""
+def estimator_overview(results: list[EstimatorResult], n: int, m: int) -> pd.DataFrame:
+    """Per estimator: diverged runs, average NEES (n dof) and NIS (m dof) over runs and time, the
+    fraction of time steps whose run-averaged NEES and NIS lie in the 95 % χ² band, and the time
+    per step."""
     rows = []
     for res in results:
+        alive = (~res.diverged).any()
         rows.append(
             {
                 "estimator": res.name,
                 "diverged": int(res.diverged.sum()),
                 "runs": int(res.diverged.size),
-                "mean_nees": float(np.nanmean(res.mean_nees)) if (~res.diverged).any() else np.nan,
-                "mean_nis": float(np.nanmean(res.mean_nis)) if (~res.diverged).any() else np.nan,
+                "mean_nees": float(np.nanmean(res.mean_nees)) if alive else np.nan,
+                "nees_dof": n,
+                "nees_in_band": fraction_inside(res.nees_mean_t, n, res.alive_t),
+                "mean_nis": float(np.nanmean(res.mean_nis)) if alive else np.nan,
+                "nis_dof": m,
+                "nis_in_band": fraction_inside(res.nis_mean_t, m, res.alive_t),
                 "step_time_us": res.step_time_us,
             }
         )

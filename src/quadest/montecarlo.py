@@ -22,7 +22,17 @@ from quadest.quadrotor.simulate import simulate_truth
 from quadest.sensors.encoders import encoder_resolution, measure_rotor_speeds
 from quadest.sensors.mimu import TriadErrors, TriadSpec, draw_triad_errors, measure_triad
 
-STREAMS = ("start", "accel_errors", "gyro_errors", "accel_noise", "gyro_noise", "encoder", "initial")
+STREAMS = (
+    "start",
+    "accel_errors",
+    "gyro_errors",
+    "accel_noise",
+    "gyro_noise",
+    "encoder",
+    "initial",
+    "process",
+    "measurement",
+)  # append only: existing streams keep their draws
 
 
 @dataclass
@@ -52,6 +62,11 @@ class MonteCarloData:
     P0: np.ndarray
     companion0: np.ndarray
     labels: dict = field(default_factory=dict)
+
+
+def sample_count(duration: float, sample_period: float) -> int:
+    """Number of filter steps K in a run: samples at t_k = k T, k = 0..K."""
+    return round(duration / sample_period)
 
 
 def run_streams(seed: int, runs: int) -> dict[str, list[np.random.Generator]]:

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from quadest.consistency import chi2_band
 from quadest.montecarlo import MonteCarloData
 from quadest.runner import EstimatorResult
 
@@ -74,6 +75,53 @@ def plot_errors(data: MonteCarloData, results: list[EstimatorResult], path: Path
                 ax.set_xlabel("time [s]")
     axes[0, 0].legend(fontsize=7)
     fig.suptitle(f"Estimation error and ±3σ bounds, run {run}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_rmse_vs_time(data: MonteCarloData, results: list[EstimatorResult], bound: np.ndarray, path: Path) -> Path:
+    """RMSE over the live runs at each step, per filter state and estimator, with the PCRLB floor."""
+    model = data.model
+    fig, axes = _grid(model.n)
+    for j in range(model.n):
+        ax = axes[j]
+        for res in results:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rmse = np.sqrt(res.sq_error_t[:, j] / res.alive_t)
+            ax.plot(data.time[1:], rmse[1:], lw=0.9, label=res.name)
+        ax.plot(data.time, np.sqrt(bound[:, j]), color="k", ls="--", lw=1.2, label="PCRLB")
+        ax.set_ylabel(f"RMSE {model.state_names[j]} [{model.state_units[j]}]")
+        ax.set_yscale("log")
+        ax.grid(alpha=0.3, which="both")
+    for ax in axes[-min(3, model.n) :]:
+        ax.set_xlabel("time [s]")
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"RMSE over {data.truth.shape[0]} runs against the posterior Cramér-Rao bound")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_consistency(data: MonteCarloData, results: list[EstimatorResult], path: Path) -> Path:
+    """Run-averaged NEES and NIS against time, each with its two-sided 95 % χ² band."""
+    model = data.model
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.6), sharex=True)
+    for ax, key, dof, label in ((axes[0], "nees_mean_t", model.n, "NEES"), (axes[1], "nis_mean_t", model.m, "NIS")):
+        for res in results:
+            ax.plot(data.time[1:], getattr(res, key)[1:], lw=0.8, label=res.name)
+        alive = results[0].alive_t if results else np.zeros(data.time.size)
+        lo, hi = chi2_band(dof, np.where(alive > 0, alive, data.truth.shape[0]))
+        ax.fill_between(data.time[1:], lo[1:], hi[1:], color="0.5", alpha=0.25, lw=0, label="95 % band")
+        ax.axhline(dof, color="k", lw=0.8, ls=":")
+        ax.set_yscale("log")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(f"average {label} ({dof} dof)")
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"Consistency over {data.truth.shape[0]} runs")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

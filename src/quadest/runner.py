@@ -35,6 +35,7 @@ class EstimatorResult:
         steps: (B,) number of steps that counted (K unless the run diverged).
         nees_sum, nis_sum: (B,) sums over counted steps.
         nees_mean_t, nis_mean_t: (K+1,) averages over the runs alive at each step.
+        sq_error_t: (K+1, n) squared state errors summed over the runs alive at each step.
         alive_t: (K+1,) number of runs alive at each step.
         diverged: (B,) bool; diverged_step: (B,) first step flagged (-1 if none).
         reasons: run → reason text.
@@ -50,6 +51,7 @@ class EstimatorResult:
     nis_sum: np.ndarray
     nees_mean_t: np.ndarray
     nis_mean_t: np.ndarray
+    sq_error_t: np.ndarray
     alive_t: np.ndarray
     diverged: np.ndarray
     diverged_step: np.ndarray
@@ -119,6 +121,7 @@ def run_estimator(
     steps = np.zeros(B)
     nees_sum, nis_sum = np.zeros(B), np.zeros(B)
     nees_t, nis_t, alive_t = np.full(K1, np.nan), np.full(K1, np.nan), np.zeros(K1)
+    sq_t = np.zeros((K1, n))
     diverged = np.zeros(B, dtype=bool)
     diverged_step = np.full(B, -1)
     reasons: dict[int, str] = {}
@@ -179,6 +182,7 @@ def run_estimator(
         nees_sum[alive] += nees[alive]
         nis_sum[alive] += nis[alive]
         alive_t[k] = alive.sum()
+        sq_t[k] = (err[alive] ** 2).sum(axis=0)
         if alive.any():
             nees_t[k] = nees[alive].mean()
             nis_t[k] = nis[alive].mean()
@@ -187,18 +191,7 @@ def run_estimator(
     bar.close()
     saved = {"estimate": est_hist, "std": std_hist, "companion": comp_hist}
     return EstimatorResult(
-        name,
-        sq,
-        csq,
-        steps,
-        nees_sum,
-        nis_sum,
-        nees_t,
-        nis_t,
-        alive_t,
-        diverged,
-        diverged_step,
-        reasons,
-        elapsed / K / B * 1e6,
-        saved,
-    )
+        name=name, sq_error_sum=sq, companion_sq_error_sum=csq, steps=steps, nees_sum=nees_sum, nis_sum=nis_sum,
+        nees_mean_t=nees_t, nis_mean_t=nis_t, sq_error_t=sq_t, alive_t=alive_t, diverged=diverged,
+        diverged_step=diverged_step, reasons=reasons, step_time_us=elapsed / K / B * 1e6, saved=saved,
+    )  # fmt: skip

@@ -74,6 +74,36 @@ class QuadrotorModelConf:
 
 
 @dataclass
+class LinearModelConf:
+    """``model=linear``: 2-D constant velocity, positions measured (validation model)."""
+
+    name: str = "linear"
+    acceleration_psd: float = 0.5
+    position_noise_std: float = 0.5
+    measurement_correlation: float = 0.3
+    initial_state: list[float] = field(default_factory=lambda: [0.0, 0.0, 1.0, -0.5])
+    initial_std: list[float] = field(default_factory=lambda: [1.0, 1.0, 0.5, 0.5])
+    initial_correlation: float = 0.2
+
+
+@dataclass
+class UNGMModelConf:
+    """``model=ungm``: univariate nonstationary growth model (validation model).
+
+    ``Q``, ``R``: noise variances; the truth starts from N(x0_mean, x0_var); every filter starts
+    from mean ``m0`` and variance ``P0``.
+    """
+
+    name: str = "ungm"
+    Q: float = 1.0
+    R: float = 1.0
+    x0_mean: float = 0.1
+    x0_var: float = 0.0
+    m0: float = 0.1
+    P0: float = 1.0
+
+
+@dataclass
 class TriadConf:
     """One-sigma error levels of a sensor triad; random terms as continuous densities."""
 
@@ -138,6 +168,8 @@ def register_schemas() -> None:
     cs = ConfigStore.instance()
     cs.store(name="experiment_schema", node=ExperimentConf)
     cs.store(group="schema/model", name="quadrotor", node=QuadrotorModelConf)
+    cs.store(group="schema/model", name="linear", node=LinearModelConf)
+    cs.store(group="schema/model", name="ungm", node=UNGMModelConf)
     cs.store(group="schema/sensor", name="sensor", node=SensorConf)
     for name, cls in SCENARIOS.items():
         cs.store(group="schema/scenario", name=name, node=cls)

@@ -12,9 +12,8 @@ import math
 from quadest.errors import ConfigError
 from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
 from quadest.models.quadrotor import FORMULATIONS
+from quadest.models.registry import model_specs
 from quadest.quadrotor.scenarios import SCENARIOS
-
-MODELS = ("quadrotor",)
 
 
 def _positive(key: str, value, what: str = "must be > 0") -> None:
@@ -29,7 +28,7 @@ def _non_negative(key: str, value) -> None:
 
 def state_dimension(cfg) -> int:
     """State dimension of the configured filter model."""
-    return 6 if cfg.model.formulation == "thesis" else 9
+    return model_specs()[cfg.model.name].state_dimension(cfg)
 
 
 def validate_run(cfg) -> None:
@@ -49,9 +48,19 @@ def validate_run(cfg) -> None:
 
 
 def validate_model(cfg) -> None:
+    specs = model_specs()
+    if cfg.model.name not in specs:
+        raise ConfigError("model.name", cfg.model.name, f"one of {sorted(specs)}")
+    spec = specs[cfg.model.name]
+    spec.validate(cfg)
+    if spec.uses_quadrotor_groups:
+        validate_sensor(cfg)
+        validate_scenario(cfg)
+
+
+def validate_quadrotor(cfg) -> None:
+    """Range checks of ``model=quadrotor``."""
     m = cfg.model
-    if m.name not in MODELS:
-        raise ConfigError("model.name", m.name, f"one of {list(MODELS)}")
     if m.formulation not in FORMULATIONS:
         raise ConfigError("model.formulation", m.formulation, f"one of {list(FORMULATIONS)}")
     for key in (
@@ -151,6 +160,4 @@ def validate(cfg) -> None:
     """Check every range constraint of a composed config; raise :class:`ConfigError` on the first."""
     validate_run(cfg)
     validate_model(cfg)
-    validate_sensor(cfg)
-    validate_scenario(cfg)
     validate_estimators(cfg)

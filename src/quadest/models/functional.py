@@ -23,7 +23,8 @@ class FunctionalModel(FilterModel):
         Q, R: noise covariances (n, n) and (m, m).
         nu: input dimension (0 allowed: pass ``u`` of shape (B, 0)).
         dt: sample period (for display and for estimators that need it).
-        state_names, measurement_names: labels (default ``x0, x1, ...``, ``z0, ...``).
+        state_names, state_units, measurement_names: labels (default ``x0, x1, ...``, ``-``,
+            ``z0, ...``).
         jacobians: optional analytic ``(F(x, u), H(x, u))`` with ``x`` (B, n).
         batch_size: number of runs the model is bound to.
     """
@@ -37,6 +38,7 @@ class FunctionalModel(FilterModel):
         nu: int = 0,
         dt: float = 1.0,
         state_names: tuple[str, ...] | None = None,
+        state_units: tuple[str, ...] | None = None,
         measurement_names: tuple[str, ...] | None = None,
         jacobians: tuple[Callable, Callable] | None = None,
         batch_size: int = 1,
@@ -47,7 +49,7 @@ class FunctionalModel(FilterModel):
         self.R = np.asarray(R, dtype=float)
         self.n, self.m, self.nu, self.dt = self.Q.shape[0], self.R.shape[0], nu, dt
         self.state_names = state_names or tuple(f"x{i}" for i in range(self.n))
-        self.state_units = ("",) * self.n
+        self.state_units = state_units or ("-",) * self.n
         self.measurement_names = measurement_names or tuple(f"z{i}" for i in range(self.m))
         self._jacobians = jacobians
         self.batch_size = batch_size
@@ -66,7 +68,7 @@ class FunctionalModel(FilterModel):
         return None if self._jacobians is None else self._jacobians[1](x, u)
 
 
-class LinearGaussianModel(FunctionalModel):
+class LinearGaussianModel(FilterModel):
     """``x⁺ = A x + Bu u + v``, ``z = C x + n`` with analytic Jacobians ``A`` and ``C``."""
 
     def __init__(
@@ -78,24 +80,28 @@ class LinearGaussianModel(FunctionalModel):
         Bu: np.ndarray | None = None,
         dt: float = 1.0,
         batch_size: int = 1,
-        **names,
+        state_names: tuple[str, ...] | None = None,
+        state_units: tuple[str, ...] | None = None,
+        measurement_names: tuple[str, ...] | None = None,
     ) -> None:
-        A, C = np.asarray(A, dtype=float), np.asarray(C, dtype=float)
-        Bu = np.zeros((A.shape[0], 0)) if Bu is None else np.asarray(Bu, dtype=float)
-        self.A, self.C, self.Bu = A, C, Bu
+        self.A, self.C = np.asarray(A, dtype=float), np.asarray(C, dtype=float)
+        self.Bu = np.zeros((self.A.shape[0], 0)) if Bu is None else np.asarray(Bu, dtype=float)
+        self.Q, self.R = np.asarray(Q, dtype=float), np.asarray(R, dtype=float)
+        self.n, self.m, self.nu, self.dt = self.A.shape[0], self.C.shape[0], self.Bu.shape[1], dt
+        self.state_names = state_names or tuple(f"x{i}" for i in range(self.n))
+        self.state_units = state_units or ("-",) * self.n
+        self.measurement_names = measurement_names or tuple(f"z{i}" for i in range(self.m))
+        self.batch_size = batch_size
+        self.name = "linear"
 
-        def f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-            return x @ A.T + (u @ Bu.T)[:, None, :]
+    def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return x @ self.A.T + (u @ self.Bu.T)[:, None, :]
 
-        def h(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-            return x @ C.T
+    def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return x @ self.C.T
 
-        def jac_f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-            return np.broadcast_to(A, (x.shape[0], *A.shape)).copy()
+    def F_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(self.A, (x.shape[0], *self.A.shape)).copy()
 
-        def jac_h(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-            return np.broadcast_to(C, (x.shape[0], *C.shape)).copy()
-
-        super().__init__(
-            f, h, Q, R, nu=Bu.shape[1], dt=dt, jacobians=(jac_f, jac_h), batch_size=batch_size, name="linear", **names
-        )
+    def H_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(self.C, (x.shape[0], *self.C.shape)).copy()
