@@ -180,3 +180,12 @@ def test_failing_estimator_is_recorded_not_fatal(tmp_path):
     assert sr.loc[sr["diverged"], "failure_reason"].str.contains("indefinite").all()
     ekf = table[table["estimator"] == "ekf"]
     assert not ekf["diverged"].any()
+
+
+@pytest.mark.parametrize("experiment", sorted(p.stem for p in (Path(config_dir()) / "experiment").glob("*.yaml")))
+def test_every_experiment_composes_and_validates(experiment):
+    from quadest.config.validate import validate
+
+    cfg = compose_config([f"experiment={experiment}"])
+    validate(cfg)
+    assert cfg.model.name == "ungm" and cfg.runs == 100

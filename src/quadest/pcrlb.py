@@ -16,9 +16,11 @@ quadrotor the truth comes from the 16-state simulation flown by a controller, wi
 noise, and the bound is computed with the *filter's* Q and R. There it is the bound the filter's
 own model implies, not a bound on the true posterior.
 
-Singular or nearly singular Q: ``Q⁻¹`` is formed from ``Q + δ I`` with
-``δ = 1e-12 · max(diag Q)`` (documented regularisation). This changes nothing for the positive
-definite Q of the shipped models.
+Singular or nearly singular Q (condition number above 1e12): ``Q⁻¹`` is formed from ``Q + δ I``
+with ``δ = 1e-12 · max(diag Q)`` (documented regularisation). A well-conditioned Q, as in every
+shipped model, is inverted exactly. The information form loses about cond(Q)·eps: on the
+constant-velocity model it matches the Kalman covariance to ~1e-13 at T = 0.1 s (cond(Q) ≈ 1e3)
+and to ~1e-9 at T = 0.01 s (cond(Q) ≈ 1e5).
 """
 
 from __future__ import annotations
@@ -31,6 +33,8 @@ REGULARISATION = 1e-12
 
 
 def _inverse_noise(M: np.ndarray) -> np.ndarray:
+    if np.linalg.cond(M) <= 1.0 / REGULARISATION:
+        return np.linalg.inv(M)
     delta = REGULARISATION * float(np.max(np.diag(M)))
     return np.linalg.inv(M + delta * np.eye(M.shape[0]))
 

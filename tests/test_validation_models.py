@@ -1,0 +1,175 @@
+"""Built-in validation: the linear and UNGM models, χ² consistency and the PCRLB."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+
+from helpers import compose_config, run_filter
+from quadest.consistency import chi2_band, fraction_inside
+from quadest.estimators.base import PerRunAdapter
+from quadest.estimators.filterpy_ekf import FilterpyEKF
+from quadest.estimators.filterpy_ukf import FilterpyUKF
+from quadest.estimators.srukf import SRUKF
+from quadest.models.registry import build_data
+from quadest.pcrlb import pcrlb_variances
+from quadest.runner import run_estimator
+
+
+def test_chi2_band_matches_the_reference_values():
+    """../shared/reference/estimators.md: n = 2, N = 50 ⇒ [1.48, 2.59]; n = 6, N = 50 ⇒ [5.08, 7.00]."""
+    for dof, expected in ((2, (1.48, 2.59)), (6, (5.08, 7.00))):
+        lo, hi = chi2_band(dof, 50)
+        assert (round(float(lo), 2), round(float(hi), 2)) == expected
+
+
+@pytest.mark.parametrize("model", ["linear", "ungm"])
+def test_cli_runs_validation_models(tmp_path, model):
+    args = [
+        f"model={model}",
+        "runs=5",
+        "duration=20",
+        "sample_period=1",
+        "progress=false",
+        f"hydra.run.dir={tmp_path / model}",
+    ]
+    proc = subprocess.run(
+        [sys.executable, "-m", "quadest.cli", *args], capture_output=True, text=True, cwd=tmp_path, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "PCRLB" in proc.stdout
+    for name in ("rmse_vs_time.png", "consistency.png", "errors_3sigma.png"):
+        assert (tmp_path / model / "figures" / name).is_file()
+
+
+@pytest.fixture(scope="module")
+def linear_data():
+    # T = 0.1 s: cond(Q) ≈ 1e3; the information form loses about cond(Q)·eps (see quadest.pcrlb)
+    return build_data(compose_config(["model=linear", "runs=50", "duration=30.0", "sample_period=0.1"]))
+
+
+def kalman_reference(data):
+    model = data.model
+    xs, Ps = [], []
+    for i in range(data.x0.shape[0]):
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        kf.F, kf.H, kf.Q, kf.R = model.A, model.C, model.Q, model.R
+        kf.x, kf.P = data.x0[i].copy(), data.P0.copy()
+        run_x, run_P = [], []
+        for k in range(1, data.time.size):
+            kf.predict()
+            kf.update(data.measurements[i, k])
+            run_x.append(kf.x.copy())
+            run_P.append(kf.P.copy())
+        xs.append(run_x)
+        Ps.append(run_P)
+    return np.swapaxes(np.array(xs), 0, 1), np.swapaxes(np.array(Ps), 0, 1)
+
+
+ESTIMATORS = {
+    "ekf": lambda m: PerRunAdapter(m, FilterpyEKF),
+    "ukf": lambda m: PerRunAdapter(m, FilterpyUKF, alpha=0.5),
+    "srukf": lambda m: SRUKF(m, 0.5),
+}
+
+
+@pytest.mark.parametrize("name", sorted(ESTIMATORS))
+def test_linear_model_filters_match_the_kalman_filter(linear_data, name):
+    d = linear_data
+    B, n = d.x0.shape
+    xs, Ps = run_filter(
+        ESTIMATORS[name](d.model), d.model, d.x0, np.broadcast_to(d.P0, (B, n, n)).copy(), d.inputs, d.measurements
+    )
+    xr, Pr = kalman_reference(d)
+    assert np.abs(xs - xr).max() / np.abs(xr).max() <= 1e-9
+    assert np.abs(Ps - Pr).max() / np.abs(Pr).max() <= 1e-9
+
+
+@pytest.mark.parametrize("name", sorted(ESTIMATORS))
+def test_linear_model_filters_are_consistent(linear_data, name):
+    d = linear_data
+    res = run_estimator(name, ESTIMATORS[name](d.model), d, divergence_bound=1e6)
+    N = d.x0.shape[0]
+    lo, hi = chi2_band(d.model.n, N)
+    assert lo <= np.mean(res.mean_nees) <= hi
+    lo, hi = chi2_band(d.model.m, N)
+    assert lo <= np.mean(res.mean_nis) <= hi
+    # 95 % of the steps should fall inside the band; allow sampling variation over 300 steps
+    assert fraction_inside(res.nees_mean_t, d.model.n, res.alive_t) >= 0.85
+    assert fraction_inside(res.nis_mean_t, d.model.m, res.alive_t) >= 0.85
+
+
+def test_pcrlb_equals_kalman_covariance_on_linear_model(linear_data):
+    """For a linear-Gaussian model the information recursion is the Kalman filter's."""
+    bound = pcrlb_variances(linear_data)
+    _, Pr = kalman_reference(linear_data)
+    diag = np.diagonal(Pr[:, 0], axis1=-2, axis2=-1)
+    assert np.abs(bound[1:] - diag).max() / np.abs(diag).max() <= 1e-9
+
+
+SHIPPED = [
+    ["model=linear", "runs=100", "duration=3.0"],
+    [
+        "model=ungm",
+        "runs=100",
+        "duration=100",
+        "sample_period=1",
+        "estimator.ukf.alpha=1.0",
+        "estimator.ukf.beta=0.0",
+        "estimator.ukf.kappa=2.0",
+        "estimator.srukf.alpha=1.0",
+        "estimator.srukf.beta=0.0",
+        "estimator.srukf.kappa=2.0",
+    ],
+    [
+        "model=ungm",
+        "runs=100",
+        "duration=50",
+        "sample_period=1",
+        "model.Q=10",
+        "model.x0_mean=0",
+        "model.x0_var=5",
+        "model.m0=0",
+        "model.P0=5",
+    ],
+    ["model=quadrotor", "runs=20", "duration=3.0"],
+    ["model=quadrotor", "model.formulation=augmented", "runs=20", "duration=3.0"],
+]
+
+
+@pytest.mark.parametrize("overrides", SHIPPED, ids=lambda o: "-".join(x.split("=")[1] for x in o[:2]))
+def test_no_filter_beats_the_pcrlb(overrides):
+    """Pooled MSE over runs and steps ≥ the mean bound, up to Monte Carlo error: the relative
+    standard error of an MSE over N independent runs is at most about √(2/N); allow three."""
+    cfg = compose_config([*overrides, "estimator=[ekf,ukf,srukf]"])
+    data = build_data(cfg)
+    floor = pcrlb_variances(data)[1:].mean(axis=0)
+    N = data.x0.shape[0]
+    slack = 1.0 - 3.0 * np.sqrt(2.0 / N)
+    for name, node in cfg.estimator.items():
+        from quadest.estimators.registry import build_estimator
+
+        res = run_estimator(name, build_estimator(name, node, data.model), data, divergence_bound=1e6)
+        pooled_mse = res.sq_error_t[1:].sum(axis=0) / res.alive_t[1:].sum()
+        assert (pooled_mse >= slack * floor).all(), (name, pooled_mse / floor)
+
+
+def test_pcrlb_handles_a_singular_process_noise(linear_data):
+    """A rank-deficient Q (noise on the velocities only, as in a discretised double integrator
+    driven through its velocity) is regularised, not inverted blindly: the bound stays finite
+    and positive."""
+    from dataclasses import replace
+
+    model = linear_data.model
+    singular = replace(
+        linear_data,
+        model=type(model)(
+            model.A, model.C, np.diag([0.0, 0.0, 1e-3, 1e-3]), model.R, dt=model.dt, batch_size=model.batch_size
+        ),
+    )
+    bound = pcrlb_variances(singular)
+    assert np.isfinite(bound).all() and (bound > 0).all()
