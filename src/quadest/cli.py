@@ -49,8 +49,8 @@ def _main(cfg: DictConfig) -> None:
         return
     print(
         f"\nPer-state RMSE, mean ± std over {cfg.runs} Monte Carlo runs (per-run RMSE over time; diverged runs "
-        "excluded). PCRLB: the posterior Cramér-Rao floor under the filter model; it bounds the pooled RMSE "
-        "(rmse_summary.csv), which is at least the mean of the per-run RMSEs."
+        "excluded).\nPCRLB: the posterior Cramér-Rao floor under the filter model, a bound on the pooled RMSE "
+        "(rmse_summary.csv)."
     )
     print(summary["_table"].to_string(index=False))
     n, m = len(summary["state_names"]), len(summary["measurement_names"])

@@ -155,7 +155,7 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
             fig_dir.mkdir(exist_ok=True)
             ran = [r for r in results if r.saved["estimate"].shape[0]]
             plot_truth_vs_estimate(data, ran, fig_dir / "truth_vs_estimate.png")
-            plot_errors(data, ran, fig_dir / "errors_3sigma.png")
+            plot_errors(data, ran, fig_dir / "errors_3sigma.png", bound)
             plot_rmse_vs_time(data, results, bound, fig_dir / "rmse_vs_time.png")
             plot_consistency(data, results, fig_dir / "consistency.png")
 

@@ -50,8 +50,11 @@ def plot_truth_vs_estimate(data: MonteCarloData, results: list[EstimatorResult],
     return path
 
 
-def plot_errors(data: MonteCarloData, results: list[EstimatorResult], path: Path, run: int = 0) -> Path:
-    """Estimation error of each filter state with the filter's ±3σ bound, one row per estimator."""
+def plot_errors(
+    data: MonteCarloData, results: list[EstimatorResult], path: Path, bound: np.ndarray | None = None, run: int = 0
+) -> Path:
+    """Estimation error of each filter state with the filter's ±3σ, one row per estimator, and
+    (dashed) ±3 standard deviations of the PCRLB, the floor no estimator's spread can go below."""
     model = data.model
     n = model.n
     fig, axes = plt.subplots(len(results), n, figsize=(2.6 * n, 2.2 * len(results)), sharex=True, squeeze=False)
@@ -62,6 +65,10 @@ def plot_errors(data: MonteCarloData, results: list[EstimatorResult], path: Path
             ax = axes[r, j]
             ax.fill_between(data.time, -sig[:, j], sig[:, j], color="C0", alpha=0.2, lw=0, label="±3σ")
             ax.plot(data.time, err[:, j], color="C3", lw=0.7, label="error")
+            if bound is not None:
+                floor = 3.0 * np.sqrt(bound[:, j])
+                ax.plot(data.time, floor, color="k", ls="--", lw=0.7, label="±3σ PCRLB")
+                ax.plot(data.time, -floor, color="k", ls="--", lw=0.7)
             ax.grid(alpha=0.3)
             settled = data.time >= 0.1 * data.time[-1]  # scale to the run, not the first transient
             span = np.nanmax(np.concatenate([np.abs(err[settled, j]), sig[settled, j]]), initial=0.0)
