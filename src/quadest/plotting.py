@@ -15,6 +15,14 @@ from quadest.montecarlo import MonteCarloData
 from quadest.runner import EstimatorResult
 
 
+def _save(fig: plt.Figure, title: str, path: Path) -> Path:
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def _grid(count: int) -> tuple[plt.Figure, np.ndarray]:
     cols = 3
     rows = int(np.ceil(count / cols))
@@ -43,11 +51,7 @@ def plot_truth_vs_estimate(data: MonteCarloData, results: list[EstimatorResult],
     for ax in list(axes)[-3:]:
         ax.set_xlabel("time [s]")
     next(iter(axes)).legend(fontsize=7, loc="best")
-    fig.suptitle(f"Truth vs estimate, run {run}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, f"Truth vs estimate, run {run}", path)
 
 
 def plot_errors(
@@ -81,11 +85,7 @@ def plot_errors(
             if r == len(results) - 1:
                 ax.set_xlabel("time [s]")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"Estimation error and ±3σ bounds, run {run}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, f"Estimation error and ±3σ bounds, run {run}", path)
 
 
 def plot_rmse_vs_time(data: MonteCarloData, results: list[EstimatorResult], bound: np.ndarray, path: Path) -> Path:
@@ -105,11 +105,7 @@ def plot_rmse_vs_time(data: MonteCarloData, results: list[EstimatorResult], boun
     for ax in axes[-min(3, model.n) :]:
         ax.set_xlabel("time [s]")
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"RMSE over {data.truth.shape[0]} runs against the posterior Cramér-Rao bound")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, f"RMSE over {data.truth.shape[0]} runs against the posterior Cramér-Rao bound", path)
 
 
 def plot_consistency(data: MonteCarloData, results: list[EstimatorResult], path: Path) -> Path:
@@ -128,8 +124,4 @@ def plot_consistency(data: MonteCarloData, results: list[EstimatorResult], path:
         ax.set_ylabel(f"average {label} ({dof} dof)")
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"Consistency over {data.truth.shape[0]} runs")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, f"Consistency over {data.truth.shape[0]} runs", path)

@@ -15,6 +15,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.sensors.mimu import TriadSpec
 
 
 @dataclass
@@ -104,18 +105,6 @@ class UNGMModelConf:
 
 
 @dataclass
-class TriadConf:
-    """One-sigma error levels of a sensor triad; random terms as continuous densities."""
-
-    scale_factor: float = 0.0
-    asymmetry: float = 0.0
-    cross_coupling: float = 0.0
-    bias: float = 0.0
-    bias_random_walk: float = 0.0
-    white_noise: float = 0.0
-
-
-@dataclass
 class EncoderConf:
     """Rotor encoders: lines per revolution (0: no quantisation) and white noise (rad/s)."""
 
@@ -129,8 +118,8 @@ class SensorConf:
 
     name: str = MISSING
     error_scale: float = 1.0
-    accel: TriadConf = field(default_factory=TriadConf)
-    gyro: TriadConf = field(default_factory=TriadConf)
+    accel: TriadSpec = field(default_factory=TriadSpec)
+    gyro: TriadSpec = field(default_factory=TriadSpec)
     encoder: EncoderConf = field(default_factory=EncoderConf)
 
 

@@ -20,9 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 
-@dataclass(frozen=True)
+@dataclass
 class TriadSpec:
-    """One-sigma error levels of a triad (continuous-time densities for the random terms)."""
+    """One-sigma error levels of a triad (continuous-time densities for the random terms).
+
+    Also the config schema of ``sensor.accel`` and ``sensor.gyro``."""
 
     scale_factor: float = 0.0
     asymmetry: float = 0.0
