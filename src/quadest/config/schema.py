@@ -148,6 +148,7 @@ class ExperimentConf:
     scenario: Any = MISSING
     estimator: dict[str, Any] = field(default_factory=dict)
     output: OutputConf = field(default_factory=OutputConf)
+    sweep: dict[str, Any] = field(default_factory=dict)  # values a sweep varies and configs interpolate
 
 
 def register_schemas() -> None:
