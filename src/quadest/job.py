@@ -155,6 +155,9 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
             fig_dir.mkdir(exist_ok=True)
             ran = [r for r in results if r.saved["estimate"].shape[0]]
             plot_truth_vs_estimate(data, ran, fig_dir / "truth_vs_estimate.png")
+            if cfg.output.per_estimator_figures:
+                for res in ran:
+                    plot_truth_vs_estimate(data, [res], fig_dir / f"truth_vs_estimate_{res.name}.png")
             plot_errors(data, ran, fig_dir / "errors_3sigma.png", bound)
             plot_rmse_vs_time(data, results, bound, fig_dir / "rmse_vs_time.png")
             plot_consistency(data, results, fig_dir / "consistency.png")

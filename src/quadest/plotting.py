@@ -51,7 +51,8 @@ def plot_truth_vs_estimate(data: MonteCarloData, results: list[EstimatorResult],
     for ax in list(axes)[-3:]:
         ax.set_xlabel("time [s]")
     next(iter(axes)).legend(fontsize=7, loc="best")
-    return _save(fig, f"Truth vs estimate, run {run}", path)
+    names = ", ".join(r.name for r in results)
+    return _save(fig, f"Truth vs estimate ({names}), run {run}", path)
 
 
 def plot_errors(

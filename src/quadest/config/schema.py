@@ -126,10 +126,11 @@ class SensorConf:
 @dataclass
 class OutputConf:
     """What a job writes besides the metrics: time series of the first ``saved_runs`` runs and
-    figures of run 0."""
+    figures of run 0 (with ``per_estimator_figures``, also truth vs estimate per estimator)."""
 
     saved_runs: int = 3
     figures: bool = True
+    per_estimator_figures: bool = False
 
 
 @dataclass
