@@ -46,6 +46,11 @@ STATE_GROUPS = {"m/s": "velocities", "rad/s": "angle rates", "rad": "angles", "m
 
 
 def _value(text: str):
+    """An override's value: a number where it is one (PyYAML reads ``1e-3`` as a string)."""
+    try:
+        return float(text) if "." in text or "e" in text.lower() else int(text)
+    except ValueError:
+        pass
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError:
@@ -165,7 +170,8 @@ def tables(cells: pd.DataFrame, params: list[str]) -> dict[str, pd.DataFrame]:
     score = filt.assign(score=filt["rmse_mean"] / best_state).groupby(keys, sort=False)["score"].mean().reset_index()
     best = score.loc[score.groupby("estimator", sort=False)["score"].idxmin()].round({"score": 3})
     per_job = filt.groupby(keys, sort=False).agg(diverged=("diverged", "max"), runs=("runs", "max")).reset_index()
-    timing = filt.groupby("estimator", sort=False)["step_time_us"].agg(["mean", "std", "count"]).reset_index()
+    per_cell = filt.drop_duplicates(["job", "estimator"])
+    timing = per_cell.groupby("estimator", sort=False)["step_time_us"].agg(["mean", "std", "count"]).reset_index()
     timing.columns = ["estimator", "step_time_us_mean", "step_time_us_std", "jobs"]
     return {"rmse": rmse, "best_cells": best, "divergence": per_job, "timing": timing.round(2)}
 
