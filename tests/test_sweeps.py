@@ -26,7 +26,7 @@ MINI = """
 defaults:
   - config
   - override /estimator: [ukf, srukf]
-  - override hydra/launcher: joblib
+  - override hydra/launcher: quadest_joblib
   - _self_
 runs: 2
 duration: 0.3
@@ -44,7 +44,6 @@ hydra:
     params:
       sweep.alpha: 0.5,1.0
       sweep.beta: 0.0,2.0
-  launcher: {n_jobs: 2}
   callbacks:
     aggregate: {_target_: quadest.aggregate.AggregateCallback}
 """
@@ -89,11 +88,11 @@ def run_sweep(tmp: Path, launcher: str) -> Path:
 @pytest.fixture(scope="module")
 def sweeps(tmp_path_factory) -> dict[str, Path]:
     tmp = tmp_path_factory.mktemp("sweeps")
-    return {launcher: run_sweep(tmp, launcher) for launcher in ("joblib", "basic")}
+    return {launcher: run_sweep(tmp, launcher) for launcher in ("quadest_joblib", "basic")}
 
 
 def test_multirun_aggregate_has_the_expected_rows_and_columns(sweeps):
-    out = sweeps["joblib"] / "aggregate"
+    out = sweeps["quadest_joblib"] / "aggregate"
     cells = pd.read_csv(out / "cells.csv")
     assert sorted(cells["job"].unique()) == [0, 1, 2, 3]
     assert len(cells) == 4 * 2 * (6 + 6)  # jobs × estimators × (filter states + companions)
@@ -129,7 +128,7 @@ def test_multirun_aggregate_has_the_expected_rows_and_columns(sweeps):
 
 
 def test_basic_and_joblib_launchers_give_identical_metrics(sweeps):
-    a = pd.read_csv(sweeps["joblib"] / "aggregate" / "cells.csv").sort_values(["job", "estimator", "state"])
+    a = pd.read_csv(sweeps["quadest_joblib"] / "aggregate" / "cells.csv").sort_values(["job", "estimator", "state"])
     b = pd.read_csv(sweeps["basic"] / "aggregate" / "cells.csv").sort_values(["job", "estimator", "state"])
     cols = ["rmse_mean", "rmse_std", "mse_mean", "pooled_rmse", "mean_nees", "mean_nis"]
     pd.testing.assert_frame_equal(a[cols].reset_index(drop=True), b[cols].reset_index(drop=True))
