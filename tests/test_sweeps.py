@@ -74,6 +74,7 @@ def run_sweep(tmp: Path, launcher: str) -> Path:
             "mini",
             f"hydra/launcher={launcher}",
             f"hydra.sweep.dir={out}",
+            "runs=2",  # a command-line override named like a table column
         ],
         cwd=tmp,
         capture_output=True,
@@ -96,6 +97,7 @@ def test_multirun_aggregate_has_the_expected_rows_and_columns(sweeps):
     cells = pd.read_csv(out / "cells.csv")
     assert sorted(cells["job"].unique()) == [0, 1, 2, 3]
     assert len(cells) == 4 * 2 * (6 + 6)  # jobs × estimators × (filter states + companions)
+    assert (cells["override.runs"] == 2).all() and (cells["runs"] == 2).all()
     for col in (
         "sweep.alpha",
         "sweep.beta",

@@ -42,6 +42,11 @@ from scipy.stats import t as student_t
 
 from quadest.job import markdown_table
 
+# Columns the aggregate tables use themselves; an override with one of these names (``runs=20``)
+# becomes ``override.<name>``.
+OWN_COLUMNS = {"job", "status", "error", "commit", "estimator", "quantity", "state", "unit", "rmse_mean", "rmse_std",
+               "mse_mean", "runs", "diverged", "pooled_rmse", "pcrlb", "step_time_us", "mean_nees", "nees_in_band",
+               "mean_nis", "nis_in_band", "ci95_low", "ci95_high"}  # fmt: skip
 STATE_GROUPS = {"m/s": "velocities", "rad/s": "angle rates", "rad": "angles", "m": "positions"}
 
 
@@ -84,6 +89,7 @@ def load_sweep(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
         for item in overrides or []:
             key, _, value = str(item).partition("=")
             key = key.lstrip("+~")
+            key = f"override.{key}" if key in OWN_COLUMNS else key
             if not key.startswith("hydra"):
                 cell[key] = _value(value)
                 if key not in params:
