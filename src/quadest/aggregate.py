@@ -189,8 +189,8 @@ def _param(params: list[str], suffix: str) -> str | None:
 def _save(fig, path: Path) -> list[Path]:
     fig.tight_layout()
     paths = [path.with_suffix(".png"), path.with_suffix(".pdf")]
-    for p in paths:
-        fig.savefig(p, dpi=110)
+    for p in paths:  # no creation date in the PDF, so regenerating gives the same file
+        fig.savefig(p, dpi=110, metadata={"CreationDate": None} if p.suffix == ".pdf" else None)
     plt.close(fig)
     return paths
 
