@@ -195,6 +195,24 @@ def _save(fig, path: Path) -> list[Path]:
     return paths
 
 
+def _rmse_lines(axes, sel: pd.DataFrame, states: list[str], x: str, label: str) -> None:
+    """One line per panel (state): RMSE against ``x`` with 95 % CI error bars."""
+    for ax, state in zip(axes, states, strict=True):
+        s = sel[sel["state"] == state].sort_values(x)
+        yerr = [s["rmse_mean"] - s["ci95_low"], s["ci95_high"] - s["rmse_mean"]]
+        ax.errorbar(s[x], s["rmse_mean"], yerr=yerr, marker="o", ms=3, capsize=2, label=label)
+
+
+def _label_axes(axes, states: list[str], units: dict, xlabel: str, log_y: bool) -> None:
+    for ax, state in zip(axes, states, strict=True):
+        ax.set_xscale("log")
+        if log_y:
+            ax.set_yscale("log")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(f"RMSE {state} [{units[state]}]")
+        ax.grid(alpha=0.3, which="both")
+
+
 def figures(cells: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
     made: list[Path] = []
     filt = cells[cells["quantity"] == "filter"]
@@ -205,29 +223,14 @@ def figures(cells: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
     for est, part in filt.groupby("estimator", sort=False):
         if alpha:
             fig, axes = plt.subplots(1, len(states), figsize=(3.2 * len(states), 3.0), squeeze=False)
-            combos = part[[c for c in (beta, kappa) if c]].drop_duplicates().itertuples(index=False)
-            for combo in combos:
+            swept = [c for c in (beta, kappa) if c]
+            for combo in part[swept].drop_duplicates().itertuples(index=False):
                 sel = part
-                label = ", ".join(f"{c.split('.')[-1]}={v}" for c, v in zip([beta, kappa], combo, strict=False) if c)
-                for c, v in zip([beta, kappa], combo, strict=False):
-                    if c:
-                        sel = sel[sel[c] == v]
-                for ax, state in zip(axes[0], states, strict=True):
-                    s = sel[sel["state"] == state].sort_values(alpha)
-                    ax.errorbar(
-                        s[alpha],
-                        s["rmse_mean"],
-                        yerr=[s["rmse_mean"] - s["ci95_low"], s["ci95_high"] - s["rmse_mean"]],
-                        marker="o",
-                        ms=3,
-                        capsize=2,
-                        label=label,
-                    )
-            for ax, state in zip(axes[0], states, strict=True):
-                ax.set_xscale("log")
-                ax.set_xlabel("α")
-                ax.set_ylabel(f"RMSE {state} [{units[state]}]")
-                ax.grid(alpha=0.3, which="both")
+                for c, v in zip(swept, combo, strict=True):
+                    sel = sel[sel[c] == v]
+                label = ", ".join(f"{c.split('.')[-1]}={v}" for c, v in zip(swept, combo, strict=True))
+                _rmse_lines(axes[0], sel, states, alpha, label)
+            _label_axes(axes[0], states, units, "α", log_y=False)
             axes[0, 0].legend(fontsize=7)
             fig.suptitle(f"{est}: RMSE vs α (95 % CI of the mean over runs)")
             made += _save(fig, out / f"rmse_vs_alpha_{est}")
@@ -257,23 +260,8 @@ def figures(cells: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
         fig, axes = plt.subplots(1, len(states), figsize=(3.2 * len(states), 3.0), squeeze=False)
         for keys, sel in filt.groupby(["estimator", *grades], sort=False):
             label = " / ".join(str(k) for k in (keys if isinstance(keys, tuple) else (keys,)))
-            for ax, state in zip(axes[0], states, strict=True):
-                s = sel[sel["state"] == state].sort_values(scale)
-                ax.errorbar(
-                    s[scale],
-                    s["rmse_mean"],
-                    yerr=[s["rmse_mean"] - s["ci95_low"], s["ci95_high"] - s["rmse_mean"]],
-                    marker="o",
-                    ms=3,
-                    capsize=2,
-                    label=label,
-                )
-        for ax, state in zip(axes[0], states, strict=True):
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.set_xlabel("sensor error scale")
-            ax.set_ylabel(f"RMSE {state} [{units[state]}]")
-            ax.grid(alpha=0.3, which="both")
+            _rmse_lines(axes[0], sel, states, scale, label)
+        _label_axes(axes[0], states, units, "sensor error scale", log_y=True)
         axes[0, 0].legend(fontsize=6)
         fig.suptitle("RMSE vs sensor error scale (95 % CI of the mean over runs)")
         made += _save(fig, out / "rmse_vs_error_scale")
