@@ -9,7 +9,8 @@ aggregated. It can be re-run on any sweep folder (after SLURM, after a crash).
 Writes into ``SWEEP_DIR/aggregate/``:
 
 - ``cells.csv``: the tidy table, one row per job × estimator × state with the swept parameters
-  as columns, the per-run RMSE mean, std and 95 % confidence interval of the mean (Student t),
+  and the group choices (``choice.sensor``, ...) as columns, the per-run RMSE mean, std and
+  95 % confidence interval of the mean (Student t),
   the mean per-run MSE, pooled RMSE, PCRLB, diverged runs, NEES/NIS and time per step;
 - ``rmse`` (per cell, estimator and state: ``mean ± std [95 % CI]``), ``best_cells``,
   ``divergence`` and ``timing`` tables as ``.csv``, ``.md`` and ``.tex``;
@@ -94,6 +95,13 @@ def load_sweep(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
                 cell[key] = _value(value)
                 if key not in params:
                     params.append(key)
+        hydra_file = job_dir / ".hydra" / "hydra.yaml"
+        if hydra_file.is_file():
+            choices = ((yaml.safe_load(hydra_file.read_text()) or {}).get("hydra", {}).get("runtime", {})
+                       .get("choices", {}) or {})  # fmt: skip
+            for group, choice in choices.items():
+                if not group.startswith("hydra") and isinstance(choice, str):
+                    cell.setdefault(f"choice.{group}", choice)
         summary_file = job_dir / "summary.json"
         if not summary_file.is_file():
             jobs.append({"job": int(job_dir.name), "status": "did not finish", "error": "", **cell})
@@ -252,7 +260,8 @@ def figures(cells: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
                     ax.set_xlabel("α")
                     ax.set_ylabel("β")
                     ax.set_title(f"{group}" + (f", κ={kv:g}" if kv is not None else ""), fontsize=9)
-                    fig.colorbar(im, ax=ax, label="mean RMSE")
+                    unit = next((u for u, name in STATE_GROUPS.items() if name == group), group)
+                    fig.colorbar(im, ax=ax, label=f"mean RMSE [{unit}]")
             fig.suptitle(f"{est}: mean RMSE per state group over α × β")
             made += _save(fig, out / f"alpha_beta_heatmap_{est}")
     if scale:
