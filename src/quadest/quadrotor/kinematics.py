@@ -71,12 +71,6 @@ def rate_matrix_inv_partials(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return d_phi, d_theta
 
 
-def skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrix ``[v]×`` (..., 3, 3) with ``[v]× w = v × w``."""
-    zero = np.zeros_like(v[..., 0])
-    return _stack3x3([[zero, -v[..., 2], v[..., 1]], [v[..., 2], zero, -v[..., 0]], [-v[..., 1], v[..., 0], zero]])
-
-
 def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``A @ x`` over leading axes: A (..., i, j), x (..., j) → (..., i)."""
     return np.einsum("...ij,...j->...i", A, x)
