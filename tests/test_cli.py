@@ -176,6 +176,10 @@ def test_failing_estimator_is_recorded_not_fatal(tmp_path):
     )
     sr = table[(table["estimator"] == "srukf") & (table["state"] == "vx")]
     assert sr["diverged"].tolist() == [True, False, False, False]
+    series = np.load(tmp_path / "fail" / "timeseries.npz")["srukf/estimate"]
+    step = int(sr["diverged_step"].iloc[0])
+    assert np.isnan(series[0, step:]).all() and np.isfinite(series[0, :step]).all()
+    assert np.isfinite(series[1]).all()
     assert sr.loc[~sr["diverged"], "rmse"].notna().all()
     assert sr.loc[sr["diverged"], "failure_reason"].str.contains("indefinite").all()
     ekf = table[table["estimator"] == "ekf"]

@@ -77,9 +77,10 @@ def resolve_workers(requested: int, estimators: int) -> int:
 
 
 def _picklable(data: MonteCarloData) -> bool:
-    """Whether the data can go to worker processes (a model built from closures cannot)."""
+    """Whether the data can go to worker processes: its arrays always can, a model built from
+    closures cannot, so only the model is checked."""
     try:
-        pickle.dumps(data)
+        pickle.dumps(data.model)
     except (pickle.PicklingError, AttributeError, TypeError):
         return False
     return True

@@ -135,12 +135,14 @@ def run_estimator(
             reasons[int(i)] = why(int(i)) if callable(why) else why
 
     def record(k: int) -> None:
-        x = est.mean
-        P = est.covariance
-        if saved_runs:
-            est_hist[:, k] = x[:saved_runs]
-            std_hist[:, k] = np.sqrt(np.clip(np.diagonal(P[:saved_runs], axis1=-2, axis2=-1), 0, None))
-            comp_hist[:, k] = companion[:saved_runs]
+        """Keep the first ``saved_runs`` series; a diverged run shows NaN, not its placeholder."""
+        if not saved_runs:
+            return
+        keep = ~diverged[:saved_runs, None]
+        est_hist[:, k] = np.where(keep, est.mean[:saved_runs], np.nan)
+        var = np.diagonal(est.covariance[:saved_runs], axis1=-2, axis2=-1)
+        std_hist[:, k] = np.where(keep, np.sqrt(np.clip(var, 0, None)), np.nan)
+        comp_hist[:, k] = np.where(keep, companion[:saved_runs], np.nan)
 
     elapsed = 0.0
     t0 = time.perf_counter()
