@@ -9,7 +9,12 @@ Optional capabilities are declared in ``capabilities``, never guessed:
 
 - ``"innovation"``: after ``update``, :meth:`Estimator.innovation` returns the innovation
   ``ν = z − ẑ`` and the lower factor of its covariance (for NIS);
-- ``"sqrt_covariance"``: :attr:`Estimator.sqrt_covariance` is the filter's own factor.
+- ``"sqrt_covariance"``: :attr:`Estimator.sqrt_covariance` is the filter's own factor;
+- ``"random"``: the estimator draws random numbers. Before ``initialize`` the runner hands it one
+  ``np.random.Generator`` per run (:meth:`Estimator.set_generators`), made from that run's
+  ``"estimator"`` stream of the experiment's ``SeedSequence``, separate from the truth and sensor
+  streams. Every random estimator of a job gets fresh generators from the same seeds (common
+  random numbers between estimators), so adding one changes no other estimator's numbers.
 
 A run that fails (a downdate that would make a covariance indefinite, a non-finite number, an
 exception inside a single-run estimator) is *flagged*: ``failed[i]`` becomes true and
@@ -26,7 +31,7 @@ import numpy as np
 from quadest.errors import FilterDivergence
 from quadest.models.base import FilterModel
 
-CAPABILITIES = frozenset({"innovation", "sqrt_covariance"})
+CAPABILITIES = frozenset({"innovation", "sqrt_covariance", "random"})
 
 
 class _FailureLog:
@@ -85,20 +90,30 @@ class Estimator(_FailureLog, ABC):
     def covariance(self) -> np.ndarray:
         """Current covariance (B, n, n)."""
 
+    @property
+    def sqrt_covariance(self) -> np.ndarray:
+        """Lower factor of the current covariance (B, n, n), for estimators that declare the
+        ``"sqrt_covariance"`` capability."""
+        raise AttributeError(f"{type(self).__name__} does not declare the 'sqrt_covariance' capability")
+
     def innovation(self) -> tuple[np.ndarray, np.ndarray]:
         """Last innovation (B, m) and the lower factor of its covariance (B, m, m)."""
         raise AttributeError(f"{type(self).__name__} does not declare the 'innovation' capability")
 
-    def quarantine(self, mean: np.ndarray, second: np.ndarray, safe_mean: np.ndarray, safe_second: np.ndarray) -> None:
-        """Flag runs whose mean or covariance (or factor) stopped being finite, and park every
-        failed run on finite placeholder values in place, so that it cannot disturb the
-        arithmetic of the others (every batched operation works run by run)."""
-        finite = np.isfinite(mean).all(-1) & np.isfinite(second).all((-2, -1))
+    def set_generators(self, rngs: list[np.random.Generator]) -> None:
+        """Receive one generator per run (``"random"`` capability); called before ``initialize``."""
+        self.rngs = list(rngs)
+
+    def quarantine(self, mean: np.ndarray, spread: np.ndarray, safe_mean: np.ndarray, safe_spread: np.ndarray) -> None:
+        """Flag runs whose mean or ``spread`` (covariance or its factor) stopped being finite, and
+        park every failed run on finite placeholder values in place, so that it cannot disturb
+        the arithmetic of the others (every batched operation works run by run)."""
+        finite = np.isfinite(mean).all(-1) & np.isfinite(spread).all((-2, -1))
         if not finite.all():
             self.flag(np.flatnonzero(~finite), "non-finite mean or covariance")
         if self.failed.any():
             mean[self.failed] = safe_mean[self.failed]
-            second[self.failed] = safe_second[self.failed]
+            spread[self.failed] = safe_spread[self.failed]
 
 
 class SingleRunEstimator(ABC):
@@ -136,6 +151,10 @@ class SingleRunEstimator(ABC):
         """Last innovation (m,) and its covariance (m, m) (not a factor)."""
         raise AttributeError(f"{type(self).__name__} does not declare the 'innovation' capability")
 
+    def set_generator(self, rng: np.random.Generator) -> None:
+        """Receive this run's generator (``"random"`` capability); called before ``initialize``."""
+        self.rng = rng
+
 
 class PerRunAdapter(Estimator):
     """Runs one :class:`SingleRunEstimator` per run of the batch behind the batched interface.
@@ -148,7 +167,7 @@ class PerRunAdapter(Estimator):
     def __init__(self, model: FilterModel, factory, **params) -> None:
         super().__init__(model)
         self.filters: list[SingleRunEstimator] = [factory(model.select(i), **params) for i in range(model.batch_size)]
-        self.capabilities = frozenset(type(self.filters[0]).capabilities) if self.filters else frozenset()
+        self._capabilities = frozenset(getattr(factory, "capabilities", frozenset())) - {"sqrt_covariance"}
         self._reset_failures(model.batch_size)
         self._mean = np.full((model.batch_size, model.n), np.nan)
         self._cov = np.full((model.batch_size, model.n, model.n), np.nan)
@@ -168,6 +187,15 @@ class PerRunAdapter(Estimator):
             except Exception as exc:  # a plugin's failure marks its run, never the job
                 reason = exc.reason if isinstance(exc, FilterDivergence) else f"{type(exc).__name__}: {exc}"
                 self.flag(i, reason)
+
+    @property
+    def capabilities(self) -> frozenset[str]:  # type: ignore[override]
+        """The wrapped class's capabilities (the adapter has no factor of its own)."""
+        return self._capabilities
+
+    def set_generators(self, rngs: list[np.random.Generator]) -> None:
+        for filt, rng in zip(self.filters, rngs, strict=True):
+            filt.set_generator(rng)
 
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
         self._reset_failures(len(self.filters))

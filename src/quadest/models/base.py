@@ -15,6 +15,18 @@ Shapes (the contract every estimator relies on):
   :meth:`FilterModel.H_analytic`; the others fall back to central differences.
 - ``Q`` (n, n) and ``R`` (m, m) are shared by the runs of a batch.
 
+Noise as distributions (for particle filters and non-Gaussian benchmarks): a model samples and
+scores its own process and measurement noise with :meth:`FilterModel.sample_process_noise`,
+:meth:`FilterModel.process_noise_logpdf` and their measurement twins. The defaults are the
+zero-mean Gaussians ``N(0, Q)`` and ``N(0, R)``; a model with other noise overrides them (and its
+``Q``, ``R`` stay the covariances the Gaussian filters assume).
+
+Augmented sigma-point filters (van der Merwe 2004, "UKF2") put the noise into the sigma-point
+state and call :meth:`FilterModel.f_noise` and :meth:`FilterModel.h_noise`. The defaults add the
+noise (``f(x, u) + w``); a model whose noise is not additive overrides both, sets
+``process_noise_dim``/``measurement_noise_dim`` and the covariances of ``w`` and ``v`` as ``Q``
+and ``R``. A model that cannot take noise in the state sets ``supports_augmented = False``.
+
 Some formulations carry *companion* quantities propagated outside the filter from its estimate,
 as the thesis does with the Euler angles (§5.3.1: "integrate X_k to obtain position and
 angles"). The runner keeps them per estimator and run with :meth:`companion_step` and feeds them
@@ -27,6 +39,8 @@ import copy
 from abc import ABC, abstractmethod
 
 import numpy as np
+
+from quadest.numerics.square_root import psd_sqrt
 
 
 class FilterModel(ABC):
@@ -46,6 +60,7 @@ class FilterModel(ABC):
     R: np.ndarray
     batch_size: int = 1
     fd_step: float = 1e-6
+    supports_augmented: bool = True
 
     @abstractmethod
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -73,6 +88,24 @@ class FilterModel(ABC):
         J = self.H_analytic(x, u)
         return J if J is not None else self.jacobian_fd(self.h, x, u)
 
+    def F_points(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Jacobians of ``f`` at ``K`` points per run, ``x`` (B, K, n) → (B, K, n, n) (for example
+        one per particle). Central differences in one model call unless a model overrides it."""
+        return self.jacobian_fd_points(self.f, x, u)
+
+    def H_points(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Jacobians of ``h`` at ``K`` points per run, ``x`` (B, K, n) → (B, K, m, n)."""
+        return self.jacobian_fd_points(self.h, x, u)
+
+    def jacobian_fd_points(self, fun, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Central-difference Jacobians of ``fun`` at ``x`` (B, K, n): all 2nK points in one call."""
+        B, K, n = x.shape
+        step = self.fd_step * np.maximum(1.0, np.abs(x))  # (B, K, n)
+        E = np.eye(n)[None, None] * step[:, :, None, :]  # (B, K, n, n): row j moves coordinate j
+        pts = np.concatenate([x[:, :, None, :] + E, x[:, :, None, :] - E], axis=2).reshape(B, K * 2 * n, n)
+        y = fun(pts, u).reshape(B, K, 2 * n, -1)
+        return np.swapaxes((y[:, :, :n] - y[:, :, n:]) / (2.0 * step[..., None]), -1, -2)
+
     def jacobian_fd(self, fun, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Central-difference Jacobian of ``fun`` at ``x`` (B, n): all 2n points in one call."""
         n = x.shape[-1]
@@ -81,6 +114,59 @@ class FilterModel(ABC):
         pts = np.concatenate([x[:, None, :] + E, x[:, None, :] - E], axis=1)
         y = fun(pts, u)
         return np.swapaxes((y[:, :n] - y[:, n:]) / (2.0 * step[:, :, None]), -1, -2)
+
+    # --- states that are not vectors (error-state dimension, boxplus and boxminus) ---
+
+    @property
+    def n_err(self) -> int:
+        """Dimension of the error state, the covariance and the NEES (``n`` for vector states)."""
+        return self.n
+
+    def boxplus(self, x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        """``x ⊞ dx``: move states ``x`` (..., n) by error-state vectors ``dx`` (..., n_err)
+        (filterpy's ``state_add``). Plain addition unless a model overrides it."""
+        return x + dx
+
+    def boxminus(self, y: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``y ⊟ x``: the error-state vector (..., n_err) from ``x`` to ``y`` (filterpy's
+        ``residual_x``). Plain subtraction unless a model overrides it."""
+        return y - x
+
+    # --- noise: distributions and the augmented (noise-in-the-state) form ---
+
+    @property
+    def process_noise_dim(self) -> int:
+        """Dimension of the process noise ``w`` (``Q`` is its covariance)."""
+        return self.Q.shape[0]
+
+    @property
+    def measurement_noise_dim(self) -> int:
+        """Dimension of the measurement noise ``v`` (``R`` is its covariance)."""
+        return self.R.shape[0]
+
+    def f_noise(self, x: np.ndarray, w: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Transition with explicit noise ``w`` (B, K, q): ``f(x, u) + w`` unless overridden."""
+        return self.f(x, u) + w
+
+    def h_noise(self, x: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Measurement with explicit noise ``v`` (B, K, r): ``h(x, u) + v`` unless overridden."""
+        return self.h(x, u) + v
+
+    def sample_process_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
+        """Draws of the process noise, shape ``(*size, q)``; N(0, Q) unless overridden."""
+        return _gaussian_sample(rng, self.Q, size)
+
+    def process_noise_logpdf(self, w: np.ndarray) -> np.ndarray:
+        """Log-density of process-noise values ``w`` (..., q) → (...); N(0, Q) unless overridden."""
+        return _gaussian_logpdf(w, self.Q)
+
+    def sample_measurement_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
+        """Draws of the measurement noise, shape ``(*size, r)``; N(0, R) unless overridden."""
+        return _gaussian_sample(rng, self.R, size)
+
+    def measurement_noise_logpdf(self, v: np.ndarray) -> np.ndarray:
+        """Log-density of measurement-noise values ``v`` (..., r) → (...); N(0, R) unless overridden."""
+        return _gaussian_logpdf(v, self.R)
 
     # --- companion quantities (thesis: angles and positions integrated outside the filter) ---
 
@@ -106,3 +192,15 @@ class FilterModel(ABC):
             setattr(other, name, getattr(self, name)[idx])
         other.batch_size = len(np.arange(self.batch_size)[idx])
         return other
+
+
+def _gaussian_sample(rng: np.random.Generator, C: np.ndarray, size: tuple[int, ...]) -> np.ndarray:
+    return rng.standard_normal((*size, C.shape[0])) @ psd_sqrt(C, "noise covariance").T
+
+
+def _gaussian_logpdf(e: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """``log N(e; 0, C)`` for a positive-definite ``C``, over the last axis of ``e``."""
+    L = np.linalg.cholesky(C)
+    white = np.linalg.solve(L, np.moveaxis(e, -1, 0).reshape(C.shape[0], -1))
+    maha = np.sum(white**2, axis=0).reshape(e.shape[:-1])
+    return -0.5 * (maha + C.shape[0] * np.log(2.0 * np.pi)) - np.sum(np.log(np.diag(L)))

@@ -105,3 +105,9 @@ class LinearGaussianModel(FilterModel):
 
     def H_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return np.broadcast_to(self.C, (x.shape[0], *self.C.shape)).copy()
+
+    def F_points(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(self.A, (*x.shape[:2], *self.A.shape)).copy()
+
+    def H_points(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(self.C, (*x.shape[:2], *self.C.shape)).copy()

@@ -11,13 +11,14 @@ from quadest.numerics.sigma_points import (
     ut_weights,
     weighted_mean,
 )
-from quadest.numerics.square_root import batched_cholesky, cholupdate, kalman_gain, qr_factor, whiten
+from quadest.numerics.square_root import batched_cholesky, cholupdate, kalman_gain, psd_sqrt, qr_factor, whiten
 
 __all__ = [
     "UTWeights",
     "batched_cholesky",
     "cholupdate",
     "kalman_gain",
+    "psd_sqrt",
     "qr_factor",
     "sigma_points",
     "unscented_transform",

@@ -86,6 +86,27 @@ def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
     return np.ascontiguousarray(L)
 
 
+def psd_sqrt(C: np.ndarray, name: str = "matrix") -> np.ndarray:
+    """Lower-triangular ``L`` with ``L Lᵀ = C`` for a symmetric positive *semi*-definite ``C``
+    (thesis §5.2.3 needs only ``√R_v`` with ``R_v ⪰ 0``): Cholesky when ``C`` is definite, otherwise
+    the QR factor of ``V √Λ`` from the eigen-decomposition, so a rank-deficient process noise works.
+
+    Raises:
+        ValueError: if ``C`` is not symmetric or has an eigenvalue below ``−n·eps·‖C‖`` (indefinite).
+    """
+    C = np.asarray(C, dtype=float)
+    if C.ndim != 2 or C.shape[0] != C.shape[1] or not np.allclose(C, C.T, rtol=1e-12, atol=0.0):
+        raise ValueError(f"{name} must be a symmetric square matrix")
+    try:
+        return np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        vals, vecs = np.linalg.eigh(C)
+        tol = C.shape[0] * np.finfo(float).eps * max(np.abs(vals).max(), np.finfo(float).tiny)
+        if vals.min() < -tol:
+            raise ValueError(f"{name} must be positive semi-definite (smallest eigenvalue {vals.min():.3g})") from None
+        return qr_factor((vecs * np.sqrt(np.clip(vals, 0.0, None)))[None])[0]
+
+
 def batched_cholesky(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lower Cholesky factors of a batch (B, n, n) and a mask of the runs that are not positive
     definite (their factor is NaN). One LAPACK sweep when every run is fine."""

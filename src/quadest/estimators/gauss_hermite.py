@@ -1,0 +1,31 @@
+"""Gauss–Hermite Kalman filter (Ito & Xiong 2000, IEEE TAC 45(5)), covariance form, batched:
+the sigma-point filter with a tensor-product Gauss–Hermite rule of ``p`` points per dimension
+(p^n points; exact for polynomials of degree ≤ 2p − 1 in each coordinate)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from quadest.estimators.params import ranged
+from quadest.estimators.sigma_point import SigmaPointKalmanFilter
+from quadest.models.base import FilterModel
+from quadest.numerics.rules import GaussHermiteRule
+
+
+@dataclass
+class GaussHermiteParams:
+    """Configuration of ``estimator=ghkf``: points per dimension (3 is fifth-degree exact)."""
+
+    kind: str = "ghkf"
+    p: int = ranged(3, "points per dimension (p^n points in all)", ge=1, integer=True)
+    augmented: bool = False
+
+
+class GHKF(SigmaPointKalmanFilter):
+    """Gauss–Hermite Kalman filter, covariance form."""
+
+    config_name = "ghkf"
+    Params = GaussHermiteParams
+
+    def __init__(self, model: FilterModel, p: int = 3, augmented: bool = False) -> None:
+        super().__init__(model, GaussHermiteRule(p), augmented)
