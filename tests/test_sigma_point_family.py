@@ -17,6 +17,7 @@ import pytest
 from helpers import random_spd, run_filter, simulate, smooth_model
 from quadest.estimators.central_difference import CDKF, SRCDKF
 from quadest.estimators.cubature import CKF, CKF5, SRCKF, SRCKF5
+from quadest.estimators.divided_difference import DD1
 from quadest.estimators.gauss_hermite import GHKF
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter, SquareRootSigmaPointFilter
 from quadest.estimators.srukf import SRUKF
@@ -34,6 +35,7 @@ FAMILY = [
     (CKF5, {}, []),
     (SRCKF5, {}, []),
     (GHKF, {"p": 3}, [{"p": 0}]),
+    (DD1, {}, [{"h": 0.9}]),
 ]
 
 
@@ -217,3 +219,20 @@ def test_ghkf_with_ten_points_is_exact_on_a_scalar_polynomial():
     assert np.isclose(est.mean[0, 0], m_**3 + 3 * m_ * P, rtol=1e-13)
     var = 9 * m_**4 * P + 36 * m_**2 * P**2 + 15 * P**3 + 1e-9
     assert np.isclose(est.covariance[0, 0, 0], var, rtol=1e-12)
+
+
+def test_dd1_keeps_first_order_terms_only_and_cdkf_the_second_order_too():
+    """x ~ N(m, P), f(x) = x²: E[f] = m² + P and Var[f] = 4m²P + 2P². The CDKF (DD2) is exact for
+    the mean of a quadratic and gets 4m²P + (h² − 1)P² for the variance (Nørgaard et al. 2000,
+    eq. 44 with n = 1); DD1 gives f(m) = m² and 4m²P (first-order terms only)."""
+    m_, P, h = 0.8, 0.3, 1.7
+    model = FunctionalModel(lambda x, u: x**2, lambda x, u: x, np.array([[1e-12]]), np.array([[1.0]]))
+    for cls, mean, var in (
+        (CDKF, m_**2 + P, 4 * m_**2 * P + (h**2 - 1) * P**2),
+        (DD1, m_**2, 4 * m_**2 * P),
+    ):
+        est = cls(model, h=h)
+        est.initialize(np.array([[m_]]), np.array([[[P]]]))
+        est.predict(np.zeros((1, 0)))
+        assert np.isclose(est.mean[0, 0], mean, rtol=1e-13), cls.__name__
+        assert np.isclose(est.covariance[0, 0, 0], var + 1e-12, rtol=1e-12), cls.__name__

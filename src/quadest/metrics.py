@@ -14,7 +14,12 @@ from quadest.consistency import fraction_inside
 from quadest.montecarlo import MonteCarloData
 from quadest.runner import EstimatorResult
 
-PARAMETER_COLUMNS = ("alpha", "beta", "kappa")
+
+
+def parameter_columns(estimator_params: dict[str, dict]) -> list[str]:
+    """The union of the estimators' parameter names (their ``Params`` fields as configured, in
+    order of first appearance), so ``cdkf.h`` or ``pf.particles`` tabulate like ``alpha``."""
+    return list(dict.fromkeys(k for p in estimator_params.values() for k in p if k != "kind"))
 
 
 def tidy_metrics(
@@ -25,12 +30,13 @@ def tidy_metrics(
 ) -> pd.DataFrame:
     """One row per estimator × run × state (filter states, then companion values)."""
     model = data.model
+    columns = parameter_columns(estimator_params)
     frames = []
     for res in results:
         B = res.rmse.shape[0]
         params = estimator_params.get(res.name, {})
         blocks = [
-            ("filter", model.state_names, model.state_units, res.rmse),
+            ("filter", model.error_names, model.error_units, res.rmse),
             ("companion", model.companion_names, model.companion_units, res.companion_rmse),
         ]
         for quantity, names, units, values in blocks:
@@ -52,8 +58,8 @@ def tidy_metrics(
                         "step_time_us": res.step_time_us,
                     }
                 )
-                for p in PARAMETER_COLUMNS:
-                    frame[p] = float(params[p]) if p in params else np.nan
+                for p in columns:
+                    frame[p] = params.get(p, np.nan)
                 frames.append(frame)
     table = pd.concat(frames, ignore_index=True)
     for key, value in {**data.labels, **run_labels}.items():
@@ -92,7 +98,7 @@ def floor_table(results: list[EstimatorResult], data: MonteCarloData, bound: np.
         live = res.alive_t[1:].sum()
         with np.errstate(invalid="ignore", divide="ignore"):
             pooled = np.sqrt(res.sq_error_t[1:].sum(axis=0) / live) if live else np.full(floor.shape, np.nan)
-        for j, state in enumerate(data.model.state_names):
+        for j, state in enumerate(data.model.error_names):
             rows.append(
                 {
                     "estimator": res.name,

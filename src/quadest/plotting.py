@@ -61,10 +61,10 @@ def plot_errors(
     """Estimation error of each filter state with the filter's ±3σ, one row per estimator, and
     (dashed) ±3 standard deviations of the PCRLB, the floor no estimator's spread can go below."""
     model = data.model
-    n = model.n
+    n = model.n_err
     fig, axes = plt.subplots(len(results), n, figsize=(2.6 * n, 2.2 * len(results)), sharex=True, squeeze=False)
     for r, res in enumerate(results):
-        err = res.saved["estimate"][run] - data.truth[run]
+        err = model.boxminus(res.saved["estimate"][run], data.truth[run])
         sig = 3.0 * res.saved["std"][run]
         for j in range(n):
             ax = axes[r, j]
@@ -80,7 +80,7 @@ def plot_errors(
             if np.isfinite(span) and span > 0:
                 ax.set_ylim(-1.3 * span, 1.3 * span)
             if r == 0:
-                ax.set_title(f"{model.state_names[j]} [{model.state_units[j]}]", fontsize=9)
+                ax.set_title(f"{model.error_names[j]} [{model.error_units[j]}]", fontsize=9)
             if j == 0:
                 ax.set_ylabel(res.name)
             if r == len(results) - 1:
@@ -92,18 +92,18 @@ def plot_errors(
 def plot_rmse_vs_time(data: MonteCarloData, results: list[EstimatorResult], bound: np.ndarray, path: Path) -> Path:
     """RMSE over the live runs at each step, per filter state and estimator, with the PCRLB floor."""
     model = data.model
-    fig, axes = _grid(model.n)
-    for j in range(model.n):
+    fig, axes = _grid(model.n_err)
+    for j in range(model.n_err):
         ax = axes[j]
         for res in results:
             with np.errstate(invalid="ignore", divide="ignore"):
                 rmse = np.sqrt(res.sq_error_t[:, j] / res.alive_t)
             ax.plot(data.time[1:], rmse[1:], lw=0.9, label=res.name)
         ax.plot(data.time, np.sqrt(bound[:, j]), color="k", ls="--", lw=1.2, label="PCRLB")
-        ax.set_ylabel(f"RMSE {model.state_names[j]} [{model.state_units[j]}]")
+        ax.set_ylabel(f"RMSE {model.error_names[j]} [{model.error_units[j]}]")
         ax.set_yscale("log")
         ax.grid(alpha=0.3, which="both")
-    for ax in axes[-min(3, model.n) :]:
+    for ax in axes[-min(3, model.n_err) :]:
         ax.set_xlabel("time [s]")
     axes[0].legend(fontsize=7)
     return _save(fig, f"RMSE over {data.truth.shape[0]} runs against the posterior Cramér-Rao bound", path)
@@ -113,7 +113,7 @@ def plot_consistency(data: MonteCarloData, results: list[EstimatorResult], path:
     """Run-averaged NEES and NIS against time, each with its two-sided 95 % χ² band."""
     model = data.model
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.6), sharex=True)
-    for ax, key, dof, label in ((axes[0], "nees_mean_t", model.n, "NEES"), (axes[1], "nis_mean_t", model.m, "NIS")):
+    for ax, key, dof, label in ((axes[0], "nees_mean_t", model.n_err, "NEES"), (axes[1], "nis_mean_t", model.m, "NIS")):
         for res in results:
             ax.plot(data.time[1:], getattr(res, key)[1:], lw=0.8, label=res.name)
         alive = results[0].alive_t if results else np.zeros(data.time.size)

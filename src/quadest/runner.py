@@ -3,7 +3,16 @@
 For every estimator the runner keeps the companion values (thesis: integrated angles and
 positions), calls ``predict`` with the previous input and ``update`` with the current
 measurement, and accumulates per run: squared errors per state, NEES, NIS and the wall time of
-the filter calls. Full covariance histories are never stored; estimates and standard deviations
+the filter calls.
+
+Order within a step: ``predict(u_{k−1})``, then ``update`` with the model's primary measurement
+(every step), then once per further sensor whose sample is available at step ``k``, in the order
+of ``data.sensors`` (``update(z, u, sensor=name)``). NIS is accumulated per sensor.
+
+Errors are ``boxminus(estimate, truth)`` (the model's error state, ``n_err`` components), and the
+NEES has ``n_err`` degrees of freedom. An estimator with the ``"random"`` capability receives one
+generator per run from ``data.estimator_seeds`` before ``initialize``: fresh generators from the
+same seeds for every estimator (common random numbers). Full covariance histories are never stored; estimates and standard deviations
 are kept only for the first ``saved_runs`` runs (for figures and time series).
 
 A run is flagged as diverged when the estimator flags it (failed factorisation, non-finite
@@ -33,7 +42,8 @@ class EstimatorResult:
         sq_error_sum: (B, n) sum over steps 1..K of squared state errors.
         companion_sq_error_sum: (B, nc) the same for the companion values.
         steps: (B,) number of steps that counted (K unless the run diverged).
-        nees_sum, nis_sum: (B,) sums over counted steps.
+        nees_sum, nis_sum: (B,) sums over counted steps (NIS: the primary measurement).
+        sensor_nis: sensor name → (NIS sum (B,), number of updates (B,)) for further sensors.
         nees_mean_t, nis_mean_t: (K+1,) averages over the runs alive at each step.
         sq_error_t: (K+1, n) squared state errors summed over the runs alive at each step.
         alive_t: (K+1,) number of runs alive at each step.
@@ -58,6 +68,7 @@ class EstimatorResult:
     reasons: dict[int, str]
     step_time_us: float
     saved: dict[str, np.ndarray] = field(default_factory=dict)
+    sensor_nis: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
     def _per_run(self, totals: np.ndarray, root: bool = False) -> np.ndarray:
         """Time averages of per-run sums (square-rooted for RMSE); NaN for diverged runs."""
@@ -88,6 +99,14 @@ class EstimatorResult:
         """(B,) per-run time-average NIS (NaN without the innovation capability)."""
         return self._per_run(self.nis_sum)
 
+    def mean_sensor_nis(self, sensor: str) -> np.ndarray:
+        """(B,) per-run average NIS of a further sensor over its updates; NaN for diverged runs."""
+        total, count = self.sensor_nis[sensor]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = total / count
+        out[self.diverged] = np.nan
+        return out
+
 
 def _mahalanobis_sq(r: np.ndarray, factor: np.ndarray) -> np.ndarray:
     """``|S⁻¹ r|²`` per run; NaN where the factor is not usable."""
@@ -112,7 +131,8 @@ def run_estimator(
 ) -> EstimatorResult:
     """Filter every run of ``data`` with ``est`` and accumulate the metrics."""
     model = data.model
-    B, K1, n = data.truth.shape
+    B, K1 = data.truth.shape[:2]
+    n = model.n_err
     K = K1 - 1
     nc = data.companion_truth.shape[-1]
     saved_runs = min(saved_runs, B)
@@ -125,7 +145,7 @@ def run_estimator(
     diverged = np.zeros(B, dtype=bool)
     diverged_step = np.full(B, -1)
     reasons: dict[int, str] = {}
-    est_hist = np.full((saved_runs, K1, n), np.nan)
+    est_hist = np.full((saved_runs, K1, data.truth.shape[-1]), np.nan)
     std_hist = np.full((saved_runs, K1, n), np.nan)
     comp_hist = np.full((saved_runs, K1, nc), np.nan)
 
@@ -145,6 +165,8 @@ def run_estimator(
         comp_hist[:, k] = np.where(keep, companion[:saved_runs], np.nan)
 
     elapsed = 0.0
+    if "random" in est.capabilities:
+        est.set_generators([np.random.default_rng(seed) for seed in data.estimator_seeds])
     t0 = time.perf_counter()
     P0 = np.broadcast_to(data.P0, (B, n, n)).copy()
     est.initialize(data.x0.copy(), P0)
@@ -152,6 +174,25 @@ def run_estimator(
     companion = data.companion0.copy()
     record(0)
     has_innovation = "innovation" in est.capabilities
+    sensor_nis = {name: (np.zeros(B), np.zeros(B)) for name in data.sensors}
+
+    def update_sensors(k: int, u_now: np.ndarray) -> float:
+        """Further sensors available at step k, in order, with their NIS; returns the filter time."""
+        spent = 0.0
+        for sensor_name, sensor in data.sensors.items():
+            if not sensor.available[k]:
+                continue
+            t0 = time.perf_counter()
+            est.update(sensor.values[:, k], u_now, sensor=sensor_name)
+            spent += time.perf_counter() - t0
+            if has_innovation:
+                total, count = sensor_nis[sensor_name]
+                nis_s = _mahalanobis_sq(*est.innovation())
+                live = ~diverged & np.isfinite(nis_s)
+                total[live] += nis_s[live]
+                count[live] += 1
+        return spent
+
     bar = tqdm(
         total=K, desc=f"{name:>8s}", unit="step", disable=None if progress else True, leave=False, mininterval=0.5
     )
@@ -164,17 +205,15 @@ def run_estimator(
         est.predict(u_prev)
         est.update(data.measurements[:, k], u_now)
         elapsed += time.perf_counter() - t0
+        nis = _mahalanobis_sq(*est.innovation()) if has_innovation else np.full(B, np.nan)
+        elapsed += update_sensors(k, u_now)
         flag(est.failed, k, lambda i: est.failure_reasons.get(i, "flagged by the estimator"))
 
-        err = est.mean - data.truth[:, k]
+        err = model.boxminus(est.mean, data.truth[:, k])
         with np.errstate(invalid="ignore"):
             too_big = ~(np.abs(err) <= divergence_bound).all(-1)
         flag(too_big, k, f"state error beyond divergence_bound={divergence_bound}")
         nees = _mahalanobis_sq(err, _covariance_factor(est))
-        nis = np.full(B, np.nan)
-        if has_innovation:
-            nu, Sy = est.innovation()
-            nis = _mahalanobis_sq(nu, Sy)
         flag(~np.isfinite(nees), k, "covariance not positive definite")
 
         alive = ~diverged
@@ -196,4 +235,5 @@ def run_estimator(
         name=name, sq_error_sum=sq, companion_sq_error_sum=csq, steps=steps, nees_sum=nees_sum, nis_sum=nis_sum,
         nees_mean_t=nees_t, nis_mean_t=nis_t, sq_error_t=sq_t, alive_t=alive_t, diverged=diverged,
         diverged_step=diverged_step, reasons=reasons, step_time_us=elapsed / K / B * 1e6, saved=saved,
+        sensor_nis=sensor_nis,
     )  # fmt: skip

@@ -64,4 +64,4 @@ class IteratedEKF(SingleRunEstimator):
         return self.P
 
     def innovation(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.nu, self.S
+        return self.nu, np.linalg.cholesky(self.S)

@@ -77,8 +77,9 @@ class Estimator(_FailureLog, ABC):
         """Time update with the input ``u`` (B, nu) of the previous sample."""
 
     @abstractmethod
-    def update(self, z: np.ndarray, u: np.ndarray) -> None:
-        """Measurement update with ``z`` (B, m) and the input ``u`` (B, nu) at that sample."""
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        """Measurement update with ``z`` (B, m) and the input ``u`` (B, nu) at that sample;
+        ``sensor`` names one of ``model.sensors`` (``None``: the primary measurement)."""
 
     @property
     @abstractmethod
@@ -137,7 +138,9 @@ class SingleRunEstimator(ABC):
     def predict(self, u: np.ndarray) -> None: ...
 
     @abstractmethod
-    def update(self, z: np.ndarray, u: np.ndarray) -> None: ...
+    def update(self, z: np.ndarray, u: np.ndarray) -> None:
+        """Primary measurement update; a filter that handles ``model.sensors`` also takes a
+        keyword ``sensor`` (the name) and uses that sensor's ``h`` and ``R``."""
 
     @property
     @abstractmethod
@@ -148,7 +151,8 @@ class SingleRunEstimator(ABC):
     def covariance(self) -> np.ndarray: ...
 
     def innovation(self) -> tuple[np.ndarray, np.ndarray]:
-        """Last innovation (m,) and its covariance (m, m) (not a factor)."""
+        """Last innovation (m,) and the lower Cholesky factor of its covariance (m, m), the same
+        meaning as :meth:`Estimator.innovation`."""
         raise AttributeError(f"{type(self).__name__} does not declare the 'innovation' capability")
 
     def set_generator(self, rng: np.random.Generator) -> None:
@@ -171,8 +175,6 @@ class PerRunAdapter(Estimator):
         self._reset_failures(model.batch_size)
         self._mean = np.full((model.batch_size, model.n), np.nan)
         self._cov = np.full((model.batch_size, model.n, model.n), np.nan)
-        self._nu = np.full((model.batch_size, model.m), np.nan)
-        self._Sy = np.full((model.batch_size, model.m, model.m), np.nan)
 
     def _each(self, call) -> None:
         for i, filt in enumerate(self.filters):
@@ -204,8 +206,11 @@ class PerRunAdapter(Estimator):
     def predict(self, u: np.ndarray) -> None:
         self._each(lambda i, f: f.predict(u[i]))
 
-    def update(self, z: np.ndarray, u: np.ndarray) -> None:
-        self._each(lambda i, f: f.update(z[i], u[i]))
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        if sensor is None:
+            self._each(lambda i, f: f.update(z[i], u[i]))
+        else:
+            self._each(lambda i, f: f.update(z[i], u[i], sensor=sensor))
 
     @property
     def mean(self) -> np.ndarray:
@@ -216,13 +221,19 @@ class PerRunAdapter(Estimator):
         return self._cov
 
     def innovation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each live run's innovation and factor, stacked; NaN for failed runs and for a run whose
+        filter cannot give them (an innovation covariance that is not positive definite)."""
+        B = len(self.filters)
+        live = {}
         for i, filt in enumerate(self.filters):
             if self.failed[i]:
                 continue
-            nu, S = filt.innovation()
-            self._nu[i] = np.ravel(nu)
             try:
-                self._Sy[i] = np.linalg.cholesky(S)
-            except np.linalg.LinAlgError:
-                self._Sy[i] = np.nan
-        return self._nu, self._Sy
+                live[i] = filt.innovation()
+            except Exception:  # a run without a usable innovation gets NaN, never a crash
+                continue
+        m = np.size(next(iter(live.values()))[0]) if live else self.model.m
+        nu, Sy = np.full((B, m), np.nan), np.full((B, m, m), np.nan)
+        for i, (v, L) in live.items():
+            nu[i], Sy[i] = np.ravel(v), L
+        return nu, Sy

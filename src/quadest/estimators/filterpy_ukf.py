@@ -22,18 +22,21 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from quadest.estimators.base import SingleRunEstimator
+from quadest.estimators.params import ranged, unscented_constraints
 from quadest.models.base import FilterModel
 from quadest.numerics import ut_weights
 
 
 @dataclass
 class UKFParams:
-    """Configuration of ``estimator=ukf``."""
+    """Configuration of ``estimator=ukf``: the UT parameters of ``srukf`` (thesis eqs 5.2–5.6)."""
 
     kind: str = "ukf"
-    alpha: float = 0.5
-    beta: float = 2.0
-    kappa: float = 0.0
+    alpha: float = ranged(0.5, "spread of the sigma points; typically 1e-4 <= alpha <= 1", gt=0.0)
+    beta: float = ranged(2.0, "prior knowledge of the distribution; 2 is optimal for a Gaussian")
+    kappa: float = ranged(0.0, "secondary scaling; usually 0 for state estimation")
+
+    constraints = staticmethod(unscented_constraints)
 
 
 class _PointBatchedUKF(UnscentedKalmanFilter):
@@ -88,7 +91,9 @@ class FilterpyUKF(SingleRunEstimator):
     def predict(self, u: np.ndarray) -> None:
         self.kf.predict(u=u)
 
-    def update(self, z: np.ndarray, u: np.ndarray) -> None:
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        if sensor is not None:
+            raise NotImplementedError("the filterpy UKF baseline updates with the primary measurement only")
         self.kf.update(z, u=u)
 
     @property
@@ -100,4 +105,4 @@ class FilterpyUKF(SingleRunEstimator):
         return self.kf.P
 
     def innovation(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.kf.y, self.kf.S
+        return self.kf.y, np.linalg.cholesky(self.kf.S)

@@ -29,10 +29,10 @@ from typing import Any
 
 from quadest.errors import ConfigError, PluginError
 from quadest.estimators.base import CAPABILITIES, Estimator, PerRunAdapter, SingleRunEstimator
+from quadest.estimators.params import RESERVED_KEYS
 from quadest.models.base import FilterModel
 
 ENTRY_POINT_GROUP = "quadest.estimators"
-RESERVED_KEYS = ("kind", "_target_")
 
 
 @dataclass(frozen=True)

@@ -66,6 +66,7 @@ class SigmaPointFilter(Estimator):
         self.sqrt_R = psd_sqrt(model.R, "R")  # Sn = √Rn (5.14)
         n, q, r = model.n_err, model.process_noise_dim, model.measurement_noise_dim
         rule.validate(n + q + r if augmented else n)
+        self._sensor_cache: dict[str, tuple] = {}
 
     # --- the form: how the second moment (its "spread": covariance or factor) is kept ---
 
@@ -152,21 +153,32 @@ class SigmaPointFilter(Estimator):
         self._set_spread(self._spread(D, dim, sqrt_noise))  # (5.18)–(5.19)
         self.quarantine(self.x, self._spread_state(), self._x_safe, self._spread_safe)
 
-    def update(self, z: np.ndarray, u: np.ndarray) -> None:
-        """Measurement update (eqs 5.20–5.29)."""
+    def _sensor(self, sensor: str | None):
+        """``(h, sqrt_R, h_noise)`` of the primary measurement or of ``model.sensors[sensor]``."""
+        if sensor is None:
+            return self.model.h, self.sqrt_R, self.model.h_noise
+        if sensor not in self._sensor_cache:
+            model = self.model.sensors[sensor]
+            self._sensor_cache[sensor] = (model.h, psd_sqrt(model.R, f"R of sensor '{sensor}'"))
+        h, sqrt_R = self._sensor_cache[sensor]
+        return h, sqrt_R, lambda x, v, u: h(x, u) + v
+
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        """Measurement update (eqs 5.20–5.29), with the primary measurement or a named sensor."""
         ns = self.model.n
+        h, sqrt_R, h_noise = self._sensor(sensor)
         if self.augmented:
-            if self._carried is None:
-                X = self._points([self.sqrt_R])
-                self._carried = (X[..., :ns], X[..., ns:], self.model.n_err + self.model.measurement_noise_dim)
+            if self._carried is None or sensor is not None:
+                X = self._points([sqrt_R])
+                self._carried = (X[..., :ns], X[..., ns:], self.model.n_err + sqrt_R.shape[0])
             X, V, dim = self._carried
             self._carried = None
-            Y = self.model.h_noise(X, V, u)
+            Y = h_noise(X, V, u)
             sqrt_R = None
         else:
             X = self._points([])  # (5.20) redraw
-            Y = self.model.h(X, u)  # (5.21)
-            dim, sqrt_R = self.model.n_err, self.sqrt_R
+            Y = h(X, u)  # (5.21)
+            dim = self.model.n_err
         y_pred, DY = self._mean(Y, dim, state=False)  # (5.22)
         spread_y = self._spread(DY, dim, sqrt_R)  # (5.23)–(5.24)
         Sy = self._innovation_factor(spread_y)

@@ -37,14 +37,37 @@ from __future__ import annotations
 
 import copy
 from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
 from quadest.numerics.square_root import psd_sqrt
 
 
+@dataclass(frozen=True)
+class MeasurementModel:
+    """A further sensor of a filter model: its own ``h`` (``x`` (B, K, n), ``u`` → (B, K, m)),
+    noise covariance ``R`` and component names (Stone Soup's pattern: a measurement carries its
+    own model, so many sensors at many rates are natural). Its samples and their availability
+    come with the data (:class:`~quadest.montecarlo.data.SensorRecord`)."""
+
+    h: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    R: np.ndarray
+    names: tuple[str, ...]
+
+    @property
+    def m(self) -> int:
+        return self.R.shape[0]
+
+
 class FilterModel(ABC):
-    """Discrete-time model of a state-estimation problem, bound to a batch of runs."""
+    """Discrete-time model of a state-estimation problem, bound to a batch of runs.
+
+    ``h``/``R`` are the primary measurement, available at every step. ``sensors`` names further
+    measurement models; the runner updates with each when its sample is available.
+    """
 
     name: str = "model"
     n: int
@@ -61,6 +84,7 @@ class FilterModel(ABC):
     batch_size: int = 1
     fd_step: float = 1e-6
     supports_augmented: bool = True
+    sensors: Mapping[str, MeasurementModel] = MappingProxyType({})
 
     @abstractmethod
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -121,6 +145,16 @@ class FilterModel(ABC):
     def n_err(self) -> int:
         """Dimension of the error state, the covariance and the NEES (``n`` for vector states)."""
         return self.n
+
+    @property
+    def error_names(self) -> tuple[str, ...]:
+        """Names of the error-state components (the RMSE and NEES rows); the state names for
+        vector states."""
+        return self.state_names
+
+    @property
+    def error_units(self) -> tuple[str, ...]:
+        return self.state_units
 
     def boxplus(self, x: np.ndarray, dx: np.ndarray) -> np.ndarray:
         """``x ⊞ dx``: move states ``x`` (..., n) by error-state vectors ``dx`` (..., n_err)

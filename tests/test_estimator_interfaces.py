@@ -1,0 +1,287 @@
+"""The interfaces the next filter families build on (issue: sigma-point family):
+
+1. estimator randomness (per-run generators from the experiment's SeedSequence, its own stream);
+2. noise as distributions (sampling and log-density on the model);
+3. several sensors (named measurement models, availability, NIS per sensor);
+4. states that are not vectors (boxplus/boxminus in the mean, the errors and the NEES);
+5. parameters that describe themselves (ranges in Params, parameter columns in the tables).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+from helpers import compose_config, random_spd
+from quadest.config.validate import validate
+from quadest.errors import ConfigError
+from quadest.estimators.base import Estimator, PerRunAdapter
+from quadest.estimators.central_difference import SRCDKF
+from quadest.estimators.cubature import CKF
+from quadest.estimators.filterpy_ukf import FilterpyUKF
+from quadest.estimators.srukf import SRUKF
+from quadest.metrics import tidy_metrics
+from quadest.models.base import MeasurementModel
+from quadest.models.functional import FunctionalModel, LinearGaussianModel
+from quadest.models.registry import build_data
+from quadest.montecarlo.data import MonteCarloData, SensorRecord
+from quadest.runner import run_estimator
+
+LINEAR = ["model=linear", "sample_period=0.1", "duration=1.0", "progress=false"]
+
+
+# --- 1. estimator randomness -------------------------------------------------------------------
+
+
+class _Draws(Estimator):
+    """Records one draw per run per step from the generators the runner hands it."""
+
+    capabilities: ClassVar[frozenset[str]] = frozenset({"random"})
+
+    def initialize(self, x0, P0):
+        self.x, self.P = x0.copy(), P0.copy()
+        self._reset_failures(len(x0))
+        self.draws = []
+
+    def predict(self, u):
+        self.draws.append([rng.standard_normal() for rng in self.rngs])
+
+    def update(self, z, u, sensor=None):
+        pass
+
+    @property
+    def mean(self):
+        return self.x
+
+    @property
+    def covariance(self):
+        return self.P
+
+
+def _draws(runs: int, seed: int = 3) -> np.ndarray:
+    data = build_data(compose_config([*LINEAR, f"runs={runs}", f"seed={seed}"]))
+    est = _Draws(data.model)
+    run_estimator("draws", est, data, 1e9)
+    return np.array(est.draws)
+
+
+def test_random_estimator_gets_reproducible_per_run_generators_of_its_own_stream():
+    a, b = _draws(3), _draws(3)
+    assert np.array_equal(a, b)  # same seed, same numbers
+    assert np.array_equal(_draws(5)[:, :3], a)  # run i is the same whatever the number of runs
+    assert not np.array_equal(_draws(3, seed=4), a)
+    assert len({tuple(col) for col in a.T}) == 3  # each run its own stream
+
+
+def test_adding_a_random_estimator_changes_no_other_estimators_numbers():
+    data = build_data(compose_config([*LINEAR, "runs=3"]))
+    alone = run_estimator("srukf", SRUKF(data.model), data, 1e9)
+    run_estimator("draws", _Draws(data.model), data, 1e9)
+    again = run_estimator("srukf", SRUKF(data.model), data, 1e9)
+    assert np.array_equal(alone.sq_error_sum, again.sq_error_sum)
+
+
+def test_generators_come_from_the_datas_estimator_seeds():
+    data = build_data(compose_config([*LINEAR, "runs=2", "seed=3"]))
+    first = [np.random.default_rng(s).standard_normal() for s in data.estimator_seeds]
+    assert np.array_equal(_draws(2)[0], first)
+
+
+def test_per_run_adapter_hands_each_run_its_generator():
+    data = build_data(compose_config([*LINEAR, "runs=2"]))
+    seen = []
+
+    class Single(FilterpyUKF):
+        capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "random"})
+
+        def set_generator(self, rng):
+            seen.append(rng.standard_normal())
+
+    adapter = PerRunAdapter(data.model, Single)
+    assert "random" in adapter.capabilities
+    run_estimator("single", adapter, data, 1e9)
+    assert seen == [np.random.default_rng(s).standard_normal() for s in data.estimator_seeds]
+
+
+# --- 2. noise as distributions -----------------------------------------------------------------
+
+
+def test_gaussian_noise_log_density_and_sampling():
+    rng = np.random.default_rng(0)
+    Q, R = random_spd(rng, 3, 0.5), random_spd(rng, 2, 0.2)
+    model = LinearGaussianModel(np.eye(3), np.eye(2, 3), Q, R)
+    w = rng.standard_normal((4, 5, 3))
+    assert np.allclose(model.process_noise_logpdf(w), multivariate_normal(np.zeros(3), Q).logpdf(w), atol=1e-12)
+    v = rng.standard_normal((7, 2))
+    assert np.allclose(model.measurement_noise_logpdf(v), multivariate_normal(np.zeros(2), R).logpdf(v), atol=1e-12)
+    N = 40_000
+    draws = model.sample_process_noise(np.random.default_rng(1), (N,))
+    # Each sample-covariance entry has standard deviation √((Q_ii Q_jj + Q_ij²)/N): allow 5 of them.
+    sd = np.sqrt((np.outer(np.diag(Q), np.diag(Q)) + Q**2) / N)
+    assert (np.abs(np.cov(draws.T) - Q) <= 5 * sd).all()
+    assert (np.abs(draws.mean(0)) <= 5 * np.sqrt(np.diag(Q) / N)).all()
+
+
+# --- 3. several sensors ------------------------------------------------------------------------
+
+
+def _two_sensor_problem(runs: int = 2, steps: int = 30):
+    """2-D constant velocity, positions every step (primary), velocities every third step."""
+    rng = np.random.default_rng(5)
+    T = 0.1
+    A = np.eye(4)
+    A[0, 2] = A[1, 3] = T
+    C = np.eye(2, 4)
+    Cv = np.eye(4)[2:]
+    Q, R, Rv, P0 = random_spd(rng, 4, 0.01), random_spd(rng, 2, 0.2), random_spd(rng, 2, 0.05), random_spd(rng, 4, 1)
+    model = LinearGaussianModel(A, C, Q, R, dt=T, batch_size=runs)
+    model.sensors = {"velocity": MeasurementModel(lambda x, u: x @ Cv.T, Rv, ("vx", "vy"))}
+    x = np.zeros((runs, steps + 1, 4))
+    x[:, 0] = rng.standard_normal((runs, 4))
+    for k in range(1, steps + 1):
+        x[:, k] = x[:, k - 1] @ A.T + rng.standard_normal((runs, 4)) @ np.linalg.cholesky(Q).T
+    z = x @ C.T + rng.standard_normal((runs, steps + 1, 2)) @ np.linalg.cholesky(R).T
+    zv = x @ Cv.T + rng.standard_normal((runs, steps + 1, 2)) @ np.linalg.cholesky(Rv).T
+    available = np.arange(steps + 1) % 3 == 0
+    x0 = x[:, 0] + rng.standard_normal((runs, 4)) @ np.linalg.cholesky(P0).T
+    data = MonteCarloData(
+        model, np.arange(steps + 1) * T, x, np.zeros((runs, steps + 1, 0)), np.zeros((runs, steps + 1, 0)), z, x0, P0,
+        np.zeros((runs, 0)), [np.random.SeedSequence(i) for i in range(runs)],
+        sensors={"velocity": SensorRecord(zv, available)},
+    )  # fmt: skip
+    return data, (A, C, Cv, Q, R, Rv)
+
+
+def _sequential_kalman(data, mats):
+    """The Kalman filter with sequential updates, written out: predict, position, then velocity."""
+    A, C, Cv, Q, R, Rv = mats
+    B, K1 = data.truth.shape[:2]
+    means, stds = np.zeros((B, K1, 4)), np.zeros((B, K1, 4))
+    for i in range(B):
+        x, P = data.x0[i].copy(), data.P0.copy()
+        means[i, 0], stds[i, 0] = x, np.sqrt(np.diag(P))
+        for k in range(1, K1):
+            x, P = A @ x, A @ P @ A.T + Q
+            updates = [(C, R, data.measurements[i, k])]
+            if data.sensors["velocity"].available[k]:
+                updates.append((Cv, Rv, data.sensors["velocity"].values[i, k]))
+            for H, Rm, z in updates:
+                S = H @ P @ H.T + Rm
+                K = P @ H.T @ np.linalg.inv(S)
+                x, P = x + K @ (z - H @ x), P - K @ S @ K.T
+            means[i, k], stds[i, k] = x, np.sqrt(np.diag(P))
+    return means, stds
+
+
+@pytest.mark.parametrize("make", [lambda m: SRUKF(m), lambda m: CKF(m), lambda m: SRCDKF(m)], ids=["srukf", "ckf", "srcdkf"])
+def test_several_sensors_at_their_own_rates_equal_sequential_kalman_updates(make):
+    data, mats = _two_sensor_problem()
+    res = run_estimator("f", make(data.model), data, 1e9, saved_runs=2)
+    means, stds = _sequential_kalman(data, mats)
+    assert np.abs(res.saved["estimate"] - means).max() <= 1e-9 * np.abs(means).max()
+    assert np.abs(res.saved["std"] - stds).max() <= 1e-9 * stds.max()
+    total, count = res.sensor_nis["velocity"]
+    assert (count == data.sensors["velocity"].available[1:].sum()).all()
+    assert np.isfinite(res.mean_sensor_nis("velocity")).all()
+
+
+def test_sensor_nis_is_the_normalised_innovation_of_that_sensor():
+    """Average NIS of the velocity sensor over many runs is near its dimension (2) for a
+    consistent linear filter: mean of a χ²(2) over N samples has sd 2/√N."""
+    data, _ = _two_sensor_problem(runs=200, steps=30)
+    res = run_estimator("f", SRUKF(data.model), data, 1e9)
+    total, count = res.sensor_nis["velocity"]
+    mean = total.sum() / count.sum()
+    assert abs(mean - 2.0) <= 4 * 2.0 / np.sqrt(count.sum())
+
+
+# --- 4. states that are not vectors ------------------------------------------------------------
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+class _Circle(FunctionalModel):
+    """An angle on the circle: boxplus and boxminus wrap to (−π, π]."""
+
+    def boxplus(self, x, dx):
+        return _wrap(x + dx)
+
+    def boxminus(self, y, x):
+        return _wrap(y - x)
+
+
+def test_angle_filter_with_boxplus_equals_the_unwrapped_filter():
+    """A rotating angle measured by (cos, sin), filtered near ±π with wrapping hooks, equals the
+    same filter on the angle shifted by π (where it never wraps), to round-off. Without the hooks
+    the mean of points straddling ±π would be near 0, off by π."""
+    steps, B, T, omega = 20, 2, 0.1, 0.05
+    Q, R = np.array([[1e-4]]), 0.01 * np.eye(2)
+
+    def f(x, u):
+        return x + omega * T
+
+    wrapped = _Circle(f, lambda x, u: np.concatenate([np.cos(x), np.sin(x)], -1), Q, R, batch_size=B)
+    shifted = FunctionalModel(f, lambda x, u: -np.concatenate([np.cos(x), np.sin(x)], -1), Q, R, batch_size=B)
+    rng = np.random.default_rng(2)
+    truth = np.pi - 0.03 + omega * T * np.arange(steps + 1)[None, :, None] + np.zeros((B, 1, 1))
+    z = np.concatenate([np.cos(truth), np.sin(truth)], -1) + 0.1 * rng.standard_normal((B, steps + 1, 2))
+    P0 = np.array([[0.01]])
+    x0 = truth[:, 0] + 0.05  # just past +π: the wrapped filter starts on the other side
+
+    def data(model, x_true, start):
+        return MonteCarloData(
+            model, np.arange(steps + 1) * T, x_true, np.zeros((B, steps + 1, 0)), np.zeros((B, steps + 1, 0)), z,
+            start, P0, np.zeros((B, 0)), [np.random.SeedSequence(i) for i in range(B)],
+        )  # fmt: skip
+
+    a = run_estimator("a", SRUKF(wrapped), data(wrapped, _wrap(truth), _wrap(x0)), 1e9, saved_runs=B)
+    b = run_estimator("b", SRUKF(shifted), data(shifted, truth - np.pi, x0 - np.pi), 1e9, saved_runs=B)
+    assert (np.abs(_wrap(a.saved["estimate"] - (b.saved["estimate"] + np.pi))) <= 1e-10).all()
+    assert np.allclose(a.saved["std"], b.saved["std"], rtol=1e-9)
+    assert np.allclose(a.rmse, b.rmse, rtol=1e-8) and np.allclose(a.mean_nees, b.mean_nees, rtol=1e-8)
+    assert (a.saved["estimate"][:, -1] < 0).all()  # it did cross +π
+
+
+# --- 5. parameters that describe themselves ----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("overrides", "key", "allowed"),
+    [
+        (["estimator=[cdkf]", "estimator.cdkf.h=0.5"], "estimator.cdkf.h", ">= 1"),
+        (["estimator=[ghkf]", "estimator.ghkf.p=0"], "estimator.ghkf.p", "integer"),
+        (["estimator=[srukf]", "estimator.srukf.kappa=-7"], "estimator.srukf.kappa", "kappa > -6"),
+        (["estimator=[ukf]", "estimator.ukf.alpha=0"], "estimator.ukf.alpha", "> 0"),
+    ],
+)
+def test_parameter_ranges_come_from_the_params_dataclass(overrides, key, allowed):
+    with pytest.raises(ConfigError) as err:
+        validate(compose_config(overrides))
+    assert err.value.key == key and allowed in str(err.value)
+
+
+def test_metrics_take_parameter_columns_from_every_estimators_params():
+    cfg = compose_config([*LINEAR, "runs=2", "estimator=[cdkf,ghkf,srukf]", "estimator.cdkf.h=2.0"])
+    data = build_data(cfg)
+    results = [run_estimator(name, cls(data.model), data, 1e9) for name, cls in (("cdkf", SRCDKF), ("srukf", SRUKF))]
+    params = {"cdkf": {"kind": "cdkf", "h": 2.0, "augmented": False}, "srukf": {"kind": "srukf", "alpha": 0.5}}
+    table = tidy_metrics(results, data, params, {"seed": 1})
+    assert set(table[table.estimator == "cdkf"]["h"]) == {2.0}
+    assert table[table.estimator == "srukf"]["h"].isna().all()
+    assert set(table[table.estimator == "srukf"]["alpha"]) == {0.5}
+
+
+def test_filterpy_ukf_innovation_is_a_factor_like_every_estimators():
+    data = build_data(compose_config([*LINEAR, "runs=2"]))
+    adapter = PerRunAdapter(data.model, FilterpyUKF)
+    res = run_estimator("ukf", adapter, data, 1e9)
+    ours = run_estimator("srukf", SRUKF(data.model), data, 1e9)
+    assert np.allclose(res.mean_nis, ours.mean_nis, rtol=1e-8)
+    nu, L = adapter.innovation()
+    S = adapter.filters[0].kf.S
+    assert np.allclose(L[0] @ L[0].T, S, rtol=1e-12) and np.allclose(L[0], np.tril(L[0]))
