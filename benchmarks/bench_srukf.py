@@ -31,7 +31,7 @@ from quadest.config.schema import register_schemas
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.srukf import SRUKF
-from quadest.montecarlo import build_quadrotor_data
+from quadest.models.quadrotor_data import build_quadrotor_data
 
 BATCHES = (1, 10, 100, 1000)
 
@@ -67,7 +67,7 @@ from hydra import compose, initialize_config_dir
 from quadest.config.paths import config_dir
 from quadest.config.schema import register_schemas
 from quadest.estimators.srukf import SRUKF
-from quadest.montecarlo import build_quadrotor_data
+from quadest.models.quadrotor_data import build_quadrotor_data
 from quadest.runner import run_estimator
 register_schemas()
 with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from omegaconf import OmegaConf
 
 from helpers import compose_config
 from quadest.config.paths import config_dir
@@ -42,8 +43,15 @@ def test_cli_runs_and_writes_documented_outputs(tmp_path):
         "timeseries.npz",
         "figures/truth_vs_estimate.png",
         "figures/errors_3sigma.png",
+        "paired_comparison.csv",
     ):
         assert (out / name).is_file(), name
+    paired = pd.read_csv(out / "paired_comparison.csv")
+    assert list(dict.fromkeys(paired["pair"])) == ["ukf - ekf", "srukf - ekf", "srukf - ukf"]
+    assert len(paired) == 3 * (6 + 6)  # pairs × (filter states + companions)
+    assert "## Paired differences" in (out / "rmse_table.md").read_text()
+    for pair in ("ukf - ekf", "srukf - ekf", "srukf - ukf"):  # one printed line per pair
+        assert sum(line.strip().startswith(f"{pair}: ") for line in proc.stdout.splitlines()) == 1, pair
     table = pd.read_csv(out / "metrics.csv")
     assert set(table["estimator"]) == {"ekf", "ukf", "srukf"}
     assert len(table) == 3 * 3 * (6 + 6)  # estimators × runs × (filter states + companions)
@@ -85,7 +93,7 @@ def test_cli_works_from_any_directory(tmp_path):
 
 BAD_INPUT = [
     ("sensor=foo", "sensor", "consumer, ideal, tactical"),
-    ("estimator=[srukf,nope]", "estimator", "ekf, srukf, ukf"),
+    ("estimator=[srukf,nope]", "estimator", "srckf, srckf5, srukf, ukf"),
     ("estimator.srukf.alpa=1", "estimator.srukf.alpa", "alpha, beta, kappa"),
     ("estimator.srukf.alpha=abc", "estimator.srukf.alpha", "Float"),
     ("estimator.srukf.alpha=0", "estimator.srukf.alpha", "> 0"),
@@ -100,6 +108,8 @@ BAD_INPUT = [
     ("duration=0.001", "duration", "at least one sample period"),
     ("runs=0", "runs", ">= 1"),
     ("model.formulation=quaternion", "model.formulation", "thesis"),
+    ("+bogus_key=1", "bogus_key", "allowed keys: divergence_bound"),  # '+' adds keys past Hydra's struct mode
+    ("+sensor.gyro.bogus=2", "sensor.gyro.bogus", "white_noise"),
 ]
 
 
@@ -192,4 +202,18 @@ def test_every_experiment_composes_and_validates(experiment):
 
     cfg = compose_config([f"experiment={experiment}"])
     validate(cfg)
-    assert cfg.model.name == "ungm" and cfg.runs == 100
+    spec = OmegaConf.load(Path(config_dir()) / "experiment" / f"{experiment}.yaml")
+    models = [d["override /model"] for d in spec.defaults if "override /model" in d]
+    assert cfg.model.name == models[0] and cfg.runs == spec.runs  # the file's settings reach the config
+
+
+def _reject_constant(name: str):
+    raise ValueError(f"not strict JSON: {name}")
+
+
+def test_summary_json_is_strict_json(tmp_path):
+    """The validation models label their runs with NaN (no sensor error scale): summary.json must
+    hold null there, which strict parsers (jq, JavaScript, ...) accept, and never NaN."""
+    small_job(tmp_path, "linear", ["model=linear", "estimator=[ekf]"])
+    summary = json.loads((tmp_path / "linear" / "summary.json").read_text(), parse_constant=_reject_constant)
+    assert summary["labels"]["error_scale"] is None

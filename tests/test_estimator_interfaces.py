@@ -176,14 +176,16 @@ def _sequential_kalman(data, mats):
     return means, stds
 
 
-@pytest.mark.parametrize("make", [lambda m: SRUKF(m), lambda m: CKF(m), lambda m: SRCDKF(m)], ids=["srukf", "ckf", "srcdkf"])
+@pytest.mark.parametrize(
+    "make", [lambda m: SRUKF(m), lambda m: CKF(m), lambda m: SRCDKF(m)], ids=["srukf", "ckf", "srcdkf"]
+)
 def test_several_sensors_at_their_own_rates_equal_sequential_kalman_updates(make):
     data, mats = _two_sensor_problem()
     res = run_estimator("f", make(data.model), data, 1e9, saved_runs=2)
     means, stds = _sequential_kalman(data, mats)
     assert np.abs(res.saved["estimate"] - means).max() <= 1e-9 * np.abs(means).max()
     assert np.abs(res.saved["std"] - stds).max() <= 1e-9 * stds.max()
-    total, count = res.sensor_nis["velocity"]
+    _, count = res.sensor_nis["velocity"]
     assert (count == data.sensors["velocity"].available[1:].sum()).all()
     assert np.isfinite(res.mean_sensor_nis("velocity")).all()
 
@@ -282,6 +284,49 @@ def test_filterpy_ukf_innovation_is_a_factor_like_every_estimators():
     res = run_estimator("ukf", adapter, data, 1e9)
     ours = run_estimator("srukf", SRUKF(data.model), data, 1e9)
     assert np.allclose(res.mean_nis, ours.mean_nis, rtol=1e-8)
-    nu, L = adapter.innovation()
+    _, L = adapter.innovation()
     S = adapter.filters[0].kf.S
     assert np.allclose(L[0] @ L[0].T, S, rtol=1e-12) and np.allclose(L[0], np.tril(L[0]))
+
+
+class _Collapsed(Estimator):
+    """Estimates the truth's neighbourhood with a zero covariance (a cloud collapsed onto one
+    particle) and reports a per-run diagnostic."""
+
+    def initialize(self, x0, P0):
+        self.x, self.P = x0.copy(), np.zeros_like(P0)
+        self._reset_failures(len(x0))
+
+    def predict(self, u):
+        pass
+
+    def update(self, z, u, sensor=None):
+        pass
+
+    @property
+    def mean(self):
+        return self.x
+
+    @property
+    def covariance(self):
+        return self.P
+
+    def diagnostics(self):
+        return {"ess_mean": np.arange(len(self.x), dtype=float)}
+
+
+def test_singular_cloud_covariance_makes_nees_unavailable_not_a_divergence():
+    data = build_data(compose_config([*LINEAR, "runs=3"]))
+    gaussian = run_estimator("g", _Collapsed(data.model), data, 1e9)
+    assert gaussian.diverged.all()  # a Gaussian filter's singular covariance is a failure
+
+    class Cloud(_Collapsed):
+        capabilities: ClassVar[frozenset[str]] = frozenset({"cloud"})
+
+    cloud = run_estimator("c", Cloud(data.model), data, 1e9)
+    assert not cloud.diverged.any() and (cloud.steps == data.truth.shape[1] - 1).all()
+    assert (cloud.nees_steps == 0).all() and np.isnan(cloud.mean_nees).all()
+    assert np.isfinite(cloud.rmse).all()
+    table = tidy_metrics([cloud], data, {"c": {"kind": "c", "proposal": [1.0, 2.0]}}, {"seed": 1})
+    assert list(table.groupby("run")["ess_mean"].first()) == [0.0, 1.0, 2.0]
+    assert set(table["proposal"]) == {"[1.0, 2.0]"}  # list-valued parameters tabulate as text

@@ -86,7 +86,11 @@ def test_qr_factor_matches_cholesky_of_gram(case, extra):
     rng = np.random.default_rng(seed)
     A = rng.standard_normal((B, n, n + extra))
     out = qr_factor(A)
-    np.testing.assert_allclose(out, np.linalg.cholesky(gram(A)), rtol=1e-9, atol=1e-11)
+    # The reference chol(A Aᵀ) loses about cond(A)² eps (a square random A can be badly conditioned);
+    # QR itself is backward stable, so that is the yardstick.
+    tol = max(1e-9, 10 * np.finfo(float).eps * np.linalg.cond(A).max() ** 2)
+    scale = np.abs(out).max()
+    np.testing.assert_allclose(out, np.linalg.cholesky(gram(A)), rtol=tol, atol=tol * scale)
     assert (np.diagonal(out, axis1=-2, axis2=-1) > 0).all()
 
 

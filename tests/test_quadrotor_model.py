@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from helpers import compose_config
-from quadest.montecarlo import build_quadrotor_data, quadrotor_params, run_streams
+from quadest.models.quadrotor_config import quadrotor_params
+from quadest.models.quadrotor_data import build_quadrotor_data
+from quadest.montecarlo.streams import run_streams
 from quadest.quadrotor.controller import BacksteppingController, BacksteppingGains
 from quadest.quadrotor.dynamics import (
     body_rates,

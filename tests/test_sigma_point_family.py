@@ -12,16 +12,20 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
+from filterpy.kalman import KalmanFilter
 
-from helpers import random_spd, run_filter, simulate, smooth_model
+from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
 from quadest.estimators.central_difference import CDKF, SRCDKF
 from quadest.estimators.cubature import CKF, CKF5, SRCKF, SRCKF5
 from quadest.estimators.divided_difference import DD1
 from quadest.estimators.gauss_hermite import GHKF
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter, SquareRootSigmaPointFilter
 from quadest.estimators.srukf import SRUKF
+from quadest.job import run_job
 from quadest.models.functional import FunctionalModel
+from quadest.models.registry import build_data
 from quadest.numerics import rules
 from quadest.testing import check_estimator
 
@@ -130,7 +134,7 @@ def test_augmented_time_update_equals_additive_with_shifted_kappa(rule, rule_aug
     measurement-noise points only move weight to the centre, so one predict gives the same mean
     and covariance as the additive filter (van der Merwe 2004, §3.5.1)."""
     n = 4
-    model, x0, P0, u, z = _problem(n)
+    model, x0, P0, u, _ = _problem(n)
     q, r = model.process_noise_dim, model.measurement_noise_dim
     aug_rule = rules.UnscentedRule(rule.alpha, rule.beta, rule.kappa - (q + r))
     for form in (SigmaPointKalmanFilter, SquareRootSigmaPointFilter):
@@ -236,3 +240,31 @@ def test_dd1_keeps_first_order_terms_only_and_cdkf_the_second_order_too():
         est.predict(np.zeros((1, 0)))
         assert np.isclose(est.mean[0, 0], mean, rtol=1e-13), cls.__name__
         assert np.isclose(est.covariance[0, 0, 0], var + 1e-12, rtol=1e-12), cls.__name__
+
+
+def test_done_when_command_every_family_filter_matches_the_kalman_filter(tmp_path):
+    """The issue's command, ``quadest model=linear sample_period=0.1 duration=30
+    estimator=[ukf,srukf,cdkf,srcdkf,ckf,srckf,ckf5,srckf5,ghkf]`` (3 runs here), through the job:
+    every estimator's per-run RMSE equals that of filterpy's KalmanFilter on the same data."""
+    names = ["ukf", "srukf", "cdkf", "srcdkf", "ckf", "srckf", "ckf5", "srckf5", "ghkf"]
+    overrides = ["model=linear", "sample_period=0.1", "duration=30", "runs=3", "progress=false", "workers=1"]
+    cfg = compose_config([*overrides, f"estimator=[{','.join(names)}]", "output.saved_runs=0"])
+    run_job(cfg, tmp_path)
+    table = pd.read_csv(tmp_path / "metrics.csv")
+    data = build_data(cfg)
+    model = data.model
+    B, K1, n = data.truth.shape
+    sq = np.zeros((B, n))
+    for i in range(B):
+        kf = KalmanFilter(dim_x=n, dim_z=model.m)
+        kf.F, kf.H, kf.Q, kf.R = model.A, model.C, model.Q, model.R
+        kf.x, kf.P = data.x0[i].copy(), data.P0.copy()
+        for k in range(1, K1):
+            kf.predict()
+            kf.update(data.measurements[i, k])
+            sq[i] += (kf.x - data.truth[i, k]) ** 2
+    reference = np.sqrt(sq / (K1 - 1))
+    filt = table[table.quantity == "filter"]
+    for name in names:
+        got = filt[filt.estimator == name].pivot(index="run", columns="state", values="rmse")[list(model.state_names)]
+        assert np.allclose(got.to_numpy(), reference, rtol=1e-9, atol=0), name

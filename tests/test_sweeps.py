@@ -3,21 +3,29 @@ survives failed, unfinished and missing jobs."""
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import json
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from omegaconf import OmegaConf
 
-from quadest.aggregate import aggregate
-from quadest.aggregate import main as aggregate_main
+from quadest.aggregate.cli import main as aggregate_main
+from quadest.aggregate.report import aggregate
 from quadest.config.schema import register_schemas
 from quadest.config.validate import validate
+from quadest.estimators.registry import resolve
+from quadest.models.registry import build_data
+from quadest.testing import check_sigma_point_moments
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENTS = ROOT / "experiments"
@@ -45,19 +53,107 @@ hydra:
       sweep.alpha: 0.5,1.0
       sweep.beta: 0.0,2.0
   callbacks:
-    aggregate: {_target_: quadest.aggregate.AggregateCallback}
+    aggregate: {_target_: quadest.aggregate.callback.AggregateCallback}
 """
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in EXPERIMENTS.glob("*.yaml")))
 def test_every_experiment_file_composes_and_validates(name):
+    """The task config is validated as the CLI sees it (without the ``hydra`` node)."""
+    validate(compose_experiment(name))
+    cfg = compose_experiment(name, hydra=True)
+    assert "multirun" in cfg.hydra.sweep.dir and name in cfg.hydra.sweep.dir
+
+
+def compose_experiment(name: str, overrides: list[str] | None = None, hydra: bool = False):
     register_schemas()
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(EXPERIMENTS), version_base="1.3"):
-        cfg = compose(config_name=name, return_hydra_config=True)
+        cfg = compose(config_name=name, overrides=list(overrides or []), return_hydra_config=hydra)
     GlobalHydra.instance().clear()
-    validate(cfg)
-    assert "multirun" in cfg.hydra.sweep.dir and name in cfg.hydra.sweep.dir
+    return cfg
+
+
+def sweep_cells(name: str) -> list[dict[str, str]]:
+    """Every cell of an experiment's sweep, ``{key: value}``, parsed by Hydra's own override
+    parser (so ranges and choices expand as the sweeper expands them)."""
+    params = compose_experiment(name, hydra=True).hydra.sweeper.get("params") or {}
+    parser = OverridesParser.create()
+    axes = [
+        [(key, value) for value in parser.parse_override(f"{key}={spec}").sweep_string_iterator()]
+        for key, spec in params.items()
+    ]
+    return [dict(cell) for cell in itertools.product(*axes)]
+
+
+UT_KEYS = ("sweep.alpha", "sweep.beta", "sweep.kappa")
+
+
+def check_ut_keys(name: str, cell: dict[str, str], cfg) -> None:
+    """Every selected estimator whose parameters are the UT's receives the cell's (α, β, κ) and
+    behaves as that UT on the quadratic probe of ``quadest.testing`` (its weights W0(c) hold β)."""
+    swept = tuple(float(cell[k]) for k in UT_KEYS)
+    ut_filters = 0
+    for label, node in cfg.estimator.items():
+        cls, params = resolve(label, OmegaConf.to_container(node, resolve=True))
+        if not {"alpha", "beta", "kappa"} <= {f.name for f in dataclasses.fields(cls.Params)}:
+            continue
+        ut_filters += 1
+        got = tuple(float(params.get(k, "nan")) for k in ("alpha", "beta", "kappa"))
+        assert got == swept, f"{name} {cell}: estimator.{label} gets (alpha, beta, kappa) = {got}"
+        check_sigma_point_moments(cls, params, ut=swept)
+    assert ut_filters, f"{name} {cell}: sweeps UT parameters but selects no UT filter"
+
+
+def _measurements_at(cfg, scale: float):
+    """Data of ``cfg`` (one short run) with ``sensor.error_scale`` set to ``scale``."""
+    cfg = cfg.copy()
+    cfg.sensor.error_scale = scale
+    return build_data(cfg)
+
+
+def check_sensor_keys(name: str, cell: dict[str, str], cfg) -> None:
+    """The grade named by ``sensor`` and the ``sensor.error_scale`` reach both sides: the filter
+    model's R is the formula of quadest.models.quadrotor_config applied to the grade's YAML file
+    read directly, times scale²; the measurements' error (measurement minus the error-free one,
+    error_scale = 0) is exactly ``scale`` times the error at scale 1 (the same draws, scaled)."""
+    grade = cell.get("sensor", cfg.sensor.name)
+    scale = float(cell.get("sensor.error_scale", cfg.sensor.error_scale))
+    assert cfg.sensor.name == grade and float(cfg.sensor.error_scale) == scale
+    spec = OmegaConf.load(ROOT / "conf" / "sensor" / f"{grade}.yaml")
+    T, duration = float(cfg.sample_period), float(cfg.duration)
+    data = build_data(cfg)
+
+    def var(triad) -> float:
+        white, walk = scale * triad.get("white_noise", 0.0), scale * triad.get("bias_random_walk", 0.0)
+        return white**2 / T + walk**2 * duration / 2.0
+
+    R = float(cfg.model.measurement_noise_inflation) * np.diag([var(spec.accel)] * 3 + [var(spec.gyro)] * 3)
+    np.testing.assert_allclose(data.model.R, R, rtol=1e-12, err_msg=f"{name} {cell}: R")
+    exact = _measurements_at(cfg, 0.0).measurements
+    unit = _measurements_at(cfg, 1.0).measurements - exact
+    assert np.abs(unit).max() > 0
+    np.testing.assert_allclose(data.measurements - exact, scale * unit, rtol=1e-9, atol=1e-12 * np.abs(exact).max())
+
+
+KEY_CHECKS = {
+    **dict.fromkeys(UT_KEYS, check_ut_keys),
+    "sensor": check_sensor_keys,
+    "sensor.error_scale": check_sensor_keys,
+}
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in EXPERIMENTS.glob("*.yaml")))
+def test_every_swept_key_reaches_what_it_names(name):
+    """Composing is not enough: for each cell of each sweep, the swept values must arrive in the
+    estimators (UT parameters) or in the model and measurements (sensor grade and error scale)."""
+    cells = sweep_cells(name)
+    unchecked = {key for cell in cells for key in cell} - set(KEY_CHECKS)
+    assert not unchecked, f"{name}: no check says where {sorted(unchecked)} must arrive; add one to KEY_CHECKS"
+    for cell in cells:
+        cfg = compose_experiment(name, [*(f"{k}={v}" for k, v in cell.items()), "runs=1", "duration=0.05"])
+        for check in {KEY_CHECKS[key] for key in cell}:
+            check(name, cell, cfg)
 
 
 def run_sweep(tmp: Path, launcher: str) -> Path:

@@ -1,14 +1,15 @@
 """The ``quadest`` command: a Hydra app that runs one comparison per job.
 
 ``quadest`` runs the default comparison (EKF, UKF and SR-UKF on the thesis quadrotor) and prints
-the per-state RMSE table and the output folder. Any key can be overridden
+the per-state RMSE table, one line per estimator, one line per pair of estimators (the paired
+comparison, ``docs/outputs.md``) and the output folder. Any key can be overridden
 (``quadest estimator.srukf.alpha=0.1 sensor=tactical``) or swept (``quadest -m ...``).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
+import math
 import re
 import sys
 from pathlib import Path
@@ -25,32 +26,38 @@ from quadest.config.schema import register_schemas
 from quadest.config.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import discover
+from quadest.formatting import strict_json
 from quadest.job import run_job
+from quadest.objective import objective_value, validate_objective
+from quadest.pcrlb import pcrlb_caption
 
 register_schemas()
 
 
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
-def _main(cfg: DictConfig) -> None:
+def _main(cfg: DictConfig) -> float | None:
+    """Run one job; with an ``objective`` configured, return it (what a tuning sweeper minimises;
+    ``inf`` for a job that failed, so that the sweep goes on)."""
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
     multirun = hc.mode == RunMode.MULTIRUN
+    failed = None if cfg.objective.estimator is None else math.inf
     try:
+        validate_objective(cfg)
         summary = run_job(cfg, out_dir, list(hc.overrides.task))
     except ConfigError as exc:
         if not multirun:
             _fail(str(exc))
         _record_failure(out_dir, f"ConfigError: {exc}")
-        return
+        return failed
     except Exception as exc:  # in a sweep, one bad cell must not lose the others
         if not multirun:
             raise
         _record_failure(out_dir, f"{type(exc).__name__}: {exc}")
-        return
+        return failed
     print(
         f"\nPer-state RMSE, mean ± std over {cfg.runs} Monte Carlo runs (per-run RMSE over time; diverged runs "
-        "excluded).\nPCRLB: the posterior Cramér-Rao floor under the filter model, a bound on the pooled RMSE "
-        "(rmse_summary.csv)."
+        f"excluded).\n{pcrlb_caption(cfg.model.name)}"
     )
     print(summary["_table"].to_string(index=False))
     n, m = len(summary["state_names"]), len(summary["measurement_names"])
@@ -58,7 +65,18 @@ def _main(cfg: DictConfig) -> None:
         print(f"  {name:>8s}: {est['diverged']} of {cfg.runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
               f"({n} dof, {_pct(est['nees_in_band'])} of steps in the 95% band), mean NIS {_fmt(est['mean_nis'])} "
               f"({m} dof, {_pct(est['nis_in_band'])} in band), {_fmt(est['step_time_us'], 1)} us/step/run")  # fmt: skip
+    if summary["_paired"]:
+        print("\nPaired differences of per-run RMSE, estimator - reference, in % of the reference with the paired "
+              "bootstrap 95% CI\n(paired_comparison.csv; Holm over all pairs x states; runs diverged in either "
+              "excluded):")  # fmt: skip
+        for line in summary["_paired"]:
+            print(f"  {line}")
     print(f"\nOutputs: {out_dir}")
+    if cfg.objective.estimator is None:
+        return None
+    value = objective_value(cfg.objective, summary)
+    print(f"Objective ({cfg.objective.estimator}): {value:.6g}")
+    return value
 
 
 def _fmt(value: float | None, digits: int = 2) -> str:
@@ -71,7 +89,7 @@ def _pct(value: float | None) -> str:
 
 def _record_failure(out_dir: Path, reason: str) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "summary.json").write_text(json.dumps({"status": "failed", "error": reason}, indent=2))
+    (out_dir / "summary.json").write_text(strict_json({"status": "failed", "error": reason}, indent=2))
     print(f"quadest: job failed: {reason}", file=sys.stderr)
 
 
@@ -124,6 +142,7 @@ def precheck(argv: list[str]) -> None:
         with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
             cfg = compose(config_name="config", overrides=overrides)
         validate(cfg)
+        validate_objective(cfg)
     except ConfigError as exc:
         _fail(str(exc))
     except Exception as exc:  # Hydra/OmegaConf composition errors

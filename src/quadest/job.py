@@ -6,7 +6,6 @@ The output folder's layout is documented in ``docs/outputs.md`` (schema version
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import os
 import pickle
@@ -16,15 +15,16 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 from omegaconf import OmegaConf
 from tqdm.auto import tqdm
 
 from quadest.config.validate import validate
 from quadest.estimators.registry import build_estimator, estimator_parameters
+from quadest.formatting import markdown_table, strict_json
 from quadest.metrics import estimator_overview, floor_table, rmse_table, summarize, tidy_metrics
 from quadest.models.registry import build_data
 from quadest.montecarlo import MonteCarloData
+from quadest.paired import paired_comparison, paired_markdown, summary_lines
 from quadest.pcrlb import pcrlb_variances
 from quadest.plotting import plot_consistency, plot_errors, plot_rmse_vs_time, plot_truth_vs_estimate
 from quadest.runner import EstimatorResult, run_estimator
@@ -41,15 +41,6 @@ def git_commit() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return out.stdout.strip() if out.returncode == 0 else "unknown"
-
-
-def markdown_table(frame: pd.DataFrame) -> str:
-    """A GitHub-flavoured Markdown table of ``frame`` (no index)."""
-    cols = [str(c) for c in frame.columns]
-    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
-    for row in frame.itertuples(index=False):
-        lines.append("| " + " | ".join("" if v is None else str(v) for v in row) + " |")
-    return "\n".join(lines) + "\n"
 
 
 def failed_result(name: str, data: MonteCarloData, reason: str) -> EstimatorResult:
@@ -136,11 +127,15 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
         summary_table = summarize(table).merge(
             floor_table(results, data, bound), on=["estimator", "quantity", "state"], how="left"
         )
-        overview = estimator_overview(results, data.model.n, data.model.m)
+        overview = estimator_overview(results, data.model.n_err, data.model.m)
     table.to_csv(out_dir / "metrics.csv", index=False)
     summary_table.to_csv(out_dir / "rmse_summary.csv", index=False)
     printed = rmse_table(summary_table)
-    (out_dir / "rmse_table.md").write_text(markdown_table(printed) + "\n" + markdown_table(overview.round(4)))
+    paired = paired_comparison(table, int(cfg.seed))
+    paired.to_csv(out_dir / "paired_comparison.csv", index=False)
+    (out_dir / "rmse_table.md").write_text(
+        markdown_table(printed) + "\n" + markdown_table(overview.round(4)) + paired_markdown(paired)
+    )
     if saved_runs:
         arrays = {
             "time": data.time,
@@ -193,8 +188,9 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
                 for r in rows.to_dict("records")
             },
         }  # fmt: skip
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out_dir / "summary.json").write_text(strict_json(summary, indent=2))
     summary["_table"] = printed
+    summary["_paired"] = summary_lines(paired)
     return summary
 
 

@@ -15,7 +15,6 @@ from quadest.montecarlo import MonteCarloData
 from quadest.runner import EstimatorResult
 
 
-
 def parameter_columns(estimator_params: dict[str, dict]) -> list[str]:
     """The union of the estimators' parameter names (their ``Params`` fields as configured, in
     order of first appearance), so ``cdkf.h`` or ``pf.particles`` tabulate like ``alpha``."""
@@ -59,7 +58,10 @@ def tidy_metrics(
                     }
                 )
                 for p in columns:
-                    frame[p] = params.get(p, np.nan)
+                    value = params.get(p, np.nan)
+                    frame[p] = str(value) if isinstance(value, list | tuple | dict) else value
+                for key, per_run in res.diagnostics.items():
+                    frame[key] = per_run
                 frames.append(frame)
     table = pd.concat(frames, ignore_index=True)
     for key, value in {**data.labels, **run_labels}.items():

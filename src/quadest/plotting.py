@@ -12,6 +12,7 @@ import numpy as np
 
 from quadest.consistency import chi2_band
 from quadest.montecarlo import MonteCarloData
+from quadest.pcrlb import pcrlb_is_bound
 from quadest.runner import EstimatorResult
 
 
@@ -106,7 +107,8 @@ def plot_rmse_vs_time(data: MonteCarloData, results: list[EstimatorResult], boun
     for ax in axes[-min(3, model.n_err) :]:
         ax.set_xlabel("time [s]")
     axes[0].legend(fontsize=7)
-    return _save(fig, f"RMSE over {data.truth.shape[0]} runs against the posterior Cramér-Rao bound", path)
+    what = "bound" if pcrlb_is_bound(data.labels.get("model", "")) else "recursion (a reference, not a bound)"
+    return _save(fig, f"RMSE over {data.truth.shape[0]} runs against the posterior Cramér-Rao {what}", path)
 
 
 def plot_consistency(data: MonteCarloData, results: list[EstimatorResult], path: Path) -> Path:

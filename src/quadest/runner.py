@@ -12,12 +12,17 @@ of ``data.sensors`` (``update(z, u, sensor=name)``). NIS is accumulated per sens
 Errors are ``boxminus(estimate, truth)`` (the model's error state, ``n_err`` components), and the
 NEES has ``n_err`` degrees of freedom. An estimator with the ``"random"`` capability receives one
 generator per run from ``data.estimator_seeds`` before ``initialize``: fresh generators from the
-same seeds for every estimator (common random numbers). Full covariance histories are never stored; estimates and standard deviations
-are kept only for the first ``saved_runs`` runs (for figures and time series).
+same seeds for every estimator (common random numbers).
+
+Full covariance histories are never stored; estimates and standard deviations are kept only for
+the first ``saved_runs`` runs (for figures and time series).
 
 A run is flagged as diverged when the estimator flags it (failed factorisation, non-finite
-numbers, an exception in a single-run plugin) or when any state error exceeds
-``divergence_bound``. A diverged run stops contributing from that step on.
+numbers, an exception in a single-run plugin), when any state error exceeds
+``divergence_bound``, or when its covariance is not positive definite. For an estimator whose
+covariance only summarises a sample (capability ``"cloud"``: particle filters) a singular
+covariance makes that step's NEES unavailable instead (left out of the NEES averages, counted in
+``nees_steps``). A diverged run stops contributing from that step on.
 """
 
 from __future__ import annotations
@@ -43,6 +48,9 @@ class EstimatorResult:
         companion_sq_error_sum: (B, nc) the same for the companion values.
         steps: (B,) number of steps that counted (K unless the run diverged).
         nees_sum, nis_sum: (B,) sums over counted steps (NIS: the primary measurement).
+        nees_steps: (B,) steps whose NEES was available (fewer than ``steps`` only for "cloud"
+            estimators whose covariance was singular at some steps).
+        diagnostics: the estimator's per-run diagnostics (name → (B,)), NaN for diverged runs.
         sensor_nis: sensor name → (NIS sum (B,), number of updates (B,)) for further sensors.
         nees_mean_t, nis_mean_t: (K+1,) averages over the runs alive at each step.
         sq_error_t: (K+1, n) squared state errors summed over the runs alive at each step.
@@ -69,6 +77,8 @@ class EstimatorResult:
     step_time_us: float
     saved: dict[str, np.ndarray] = field(default_factory=dict)
     sensor_nis: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    nees_steps: np.ndarray | None = None
+    diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
 
     def _per_run(self, totals: np.ndarray, root: bool = False) -> np.ndarray:
         """Time averages of per-run sums (square-rooted for RMSE); NaN for diverged runs."""
@@ -91,8 +101,12 @@ class EstimatorResult:
 
     @property
     def mean_nees(self) -> np.ndarray:
-        """(B,) per-run time-average NEES."""
-        return self._per_run(self.nees_sum)
+        """(B,) per-run time-average NEES over the steps where it was available."""
+        steps = self.steps if self.nees_steps is None else self.nees_steps
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = self.nees_sum / steps
+        out[self.diverged] = np.nan
+        return out
 
     @property
     def mean_nis(self) -> np.ndarray:
@@ -139,7 +153,7 @@ def run_estimator(
     sq = np.zeros((B, n))
     csq = np.zeros((B, nc))
     steps = np.zeros(B)
-    nees_sum, nis_sum = np.zeros(B), np.zeros(B)
+    nees_sum, nis_sum, nees_steps = np.zeros(B), np.zeros(B), np.zeros(B)
     nees_t, nis_t, alive_t = np.full(K1, np.nan), np.full(K1, np.nan), np.zeros(K1)
     sq_t = np.zeros((K1, n))
     diverged = np.zeros(B, dtype=bool)
@@ -174,6 +188,7 @@ def run_estimator(
     companion = data.companion0.copy()
     record(0)
     has_innovation = "innovation" in est.capabilities
+    is_cloud = "cloud" in est.capabilities
     sensor_nis = {name: (np.zeros(B), np.zeros(B)) for name in data.sensors}
 
     def update_sensors(k: int, u_now: np.ndarray) -> float:
@@ -214,26 +229,32 @@ def run_estimator(
             too_big = ~(np.abs(err) <= divergence_bound).all(-1)
         flag(too_big, k, f"state error beyond divergence_bound={divergence_bound}")
         nees = _mahalanobis_sq(err, _covariance_factor(est))
-        flag(~np.isfinite(nees), k, "covariance not positive definite")
+        if not is_cloud:
+            flag(~np.isfinite(nees), k, "covariance not positive definite")
+        nees_ok = np.isfinite(nees)
 
         alive = ~diverged
         sq[alive] += err[alive] ** 2
         csq[alive] += (companion[alive] - data.companion_truth[alive, k]) ** 2
         steps[alive] += 1
-        nees_sum[alive] += nees[alive]
+        counted = alive & nees_ok
+        nees_sum[counted] += nees[counted]
+        nees_steps[counted] += 1
         nis_sum[alive] += nis[alive]
         alive_t[k] = alive.sum()
         sq_t[k] = (err[alive] ** 2).sum(axis=0)
+        if counted.any():
+            nees_t[k] = nees[counted].mean()
         if alive.any():
-            nees_t[k] = nees[alive].mean()
             nis_t[k] = nis[alive].mean()
         record(k)
         bar.update()
     bar.close()
     saved = {"estimate": est_hist, "std": std_hist, "companion": comp_hist}
+    diagnostics = {key: np.where(diverged, np.nan, np.asarray(v, dtype=float)) for key, v in est.diagnostics().items()}
     return EstimatorResult(
         name=name, sq_error_sum=sq, companion_sq_error_sum=csq, steps=steps, nees_sum=nees_sum, nis_sum=nis_sum,
         nees_mean_t=nees_t, nis_mean_t=nis_t, sq_error_t=sq_t, alive_t=alive_t, diverged=diverged,
         diverged_step=diverged_step, reasons=reasons, step_time_us=elapsed / K / B * 1e6, saved=saved,
-        sensor_nis=sensor_nis,
+        sensor_nis=sensor_nis, nees_steps=nees_steps, diagnostics=diagnostics,
     )  # fmt: skip

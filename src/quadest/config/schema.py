@@ -8,12 +8,14 @@ The tree mirrors the package: ``model/`` (:mod:`quadest.models`), ``sensor/``
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING
+from omegaconf import MISSING, DictConfig, OmegaConf
 
+from quadest.errors import ConfigError
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.sensors.mimu import TriadSpec
 
@@ -134,6 +136,16 @@ class OutputConf:
 
 
 @dataclass
+class ObjectiveConf:
+    """What a tuning sweep minimises (:mod:`quadest.objective`): the mean log-RMSE of the filter
+    states of ``estimator`` plus ``nees_penalty`` times the fraction of steps with NEES outside its
+    95 % band. With ``estimator`` set, the task returns it (Hydra's Optuna sweeper reads that)."""
+
+    estimator: str | None = None  # None: no objective
+    nees_penalty: float = 1.0
+
+
+@dataclass
 class ExperimentConf:
     """The root config: Monte Carlo settings plus the four groups."""
 
@@ -150,6 +162,30 @@ class ExperimentConf:
     estimator: dict[str, Any] = field(default_factory=dict)
     output: OutputConf = field(default_factory=OutputConf)
     sweep: dict[str, Any] = field(default_factory=dict)  # values a sweep varies and configs interpolate
+    objective: ObjectiveConf = field(default_factory=ObjectiveConf)  # set by conf/hparams_search/
+
+
+def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:
+    """Raise :class:`ConfigError` naming the first key of a schema-typed node that its schema does
+    not declare.
+
+    Hydra composes the root in struct mode, so ``bogus_key=1`` already fails, but an override with
+    ``+`` (``+bogus_key=1``) is added by design in an open dict and survives composition. Nodes
+    without a dataclass schema (``estimator``, ``sweep``, a plugin's free-form node) may hold any
+    key; their typed children are still checked.
+    """
+    schema = OmegaConf.get_type(cfg)
+    declared = {f.name for f in dataclasses.fields(schema)} if dataclasses.is_dataclass(schema) else None
+    for key in cfg.keys():
+        child = cfg._get_node(key)
+        if declared is not None and key not in declared:
+            raise ConfigError(
+                f"{prefix}{key}",
+                child._value(),
+                f"not a key of {schema.__name__}; allowed keys: {', '.join(sorted(declared))}",
+            )
+        if isinstance(child, DictConfig):
+            check_known_keys(child, f"{prefix}{key}.")
 
 
 def register_schemas() -> None:
@@ -161,8 +197,37 @@ def register_schemas() -> None:
     cs.store(group="schema/model", name="quadrotor", node=QuadrotorModelConf)
     cs.store(group="schema/model", name="linear", node=LinearModelConf)
     cs.store(group="schema/model", name="ungm", node=UNGMModelConf)
+    cs.store(group="schema/model", name="upf_benchmark", node=UPFBenchmarkModelConf)
+    cs.store(group="schema/model", name="seed001_rates", node=Seed001RatesModelConf)
     cs.store(group="schema/sensor", name="sensor", node=SensorConf)
     for name, cls in SCENARIOS.items():
         cs.store(group="schema/scenario", name=name, node=cls)
     for name, spec in builtin_estimators().items():
         cs.store(group="schema/estimator", name=name, node=spec.params)
+
+
+@dataclass
+class UPFBenchmarkModelConf:
+    """``model=upf_benchmark``: the scalar benchmark of van der Merwe et al. (2000)
+    (:mod:`quadest.models.upf_benchmark`). ``Q`` is the process-noise variance of the Gaussian
+    filters; the truth's noise is Gamma(``gamma_shape``, rate ``gamma_rate``); ``x0`` is known."""
+
+    name: str = "upf_benchmark"
+    Q: float = 0.75
+    R: float = 1.0e-5
+    gamma_shape: float = 3.0
+    gamma_rate: float = 2.0
+    switch_time: float = 30.0
+    x0: float = 1.0
+    P0: float = 0.75
+
+
+@dataclass
+class Seed001RatesModelConf(QuadrotorModelConf):
+    """``model=seed001_rates``: seed 001's angular-rate filter on the shared quadrotor
+    (:mod:`quadest.models.seed001_rates`); ``Q``, ``R``, ``P0`` are variances per axis, (rad/s)²."""
+
+    name: str = "seed001_rates"
+    Q: float = 0.1
+    R: float = 0.1
+    P0: float = 0.1

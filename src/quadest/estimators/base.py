@@ -14,7 +14,13 @@ Optional capabilities are declared in ``capabilities``, never guessed:
   ``np.random.Generator`` per run (:meth:`Estimator.set_generators`), made from that run's
   ``"estimator"`` stream of the experiment's ``SeedSequence``, separate from the truth and sensor
   streams. Every random estimator of a job gets fresh generators from the same seeds (common
-  random numbers between estimators), so adding one changes no other estimator's numbers.
+  random numbers between estimators), so adding one changes no other estimator's numbers;
+- ``"cloud"``: the covariance is a summary of a sample (a particle cloud), not the filter's state.
+  When it is singular (a cloud collapsed onto one particle) the NEES is unavailable at that step
+  and left out of the NEES averages; the run is not taken for diverged.
+
+An estimator may also report per-run diagnostics at the end of a run (:meth:`Estimator.diagnostics`:
+effective sample size, resampling counts, ...); they become columns of ``metrics.csv``.
 
 A run that fails (a downdate that would make a covariance indefinite, a non-finite number, an
 exception inside a single-run estimator) is *flagged*: ``failed[i]`` becomes true and
@@ -31,7 +37,7 @@ import numpy as np
 from quadest.errors import FilterDivergence
 from quadest.models.base import FilterModel
 
-CAPABILITIES = frozenset({"innovation", "sqrt_covariance", "random"})
+CAPABILITIES = frozenset({"innovation", "sqrt_covariance", "random", "cloud"})
 
 
 class _FailureLog:
@@ -104,6 +110,10 @@ class Estimator(_FailureLog, ABC):
     def set_generators(self, rngs: list[np.random.Generator]) -> None:
         """Receive one generator per run (``"random"`` capability); called before ``initialize``."""
         self.rngs = list(rngs)
+
+    def diagnostics(self) -> dict[str, np.ndarray]:
+        """Per-run numbers (name → (B,)) describing the finished run; none by default."""
+        return {}
 
     def quarantine(self, mean: np.ndarray, spread: np.ndarray, safe_mean: np.ndarray, safe_spread: np.ndarray) -> None:
         """Flag runs whose mean or ``spread`` (covariance or its factor) stopped being finite, and

@@ -17,7 +17,6 @@ from quadest.estimators.sigma_point import SigmaPointKalmanFilter, SquareRootSig
 from quadest.models.base import FilterModel
 from quadest.numerics.rules import CentralDifferenceRule
 
-
 SQRT3 = float(np.sqrt(3.0))
 
 

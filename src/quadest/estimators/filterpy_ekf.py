@@ -1,10 +1,17 @@
-"""Baseline EKF: filterpy 2.0.0 ``ExtendedKalmanFilter``, subclassed so that the mean propagates
-through the nonlinear model.
+"""Baseline EKF: filterpy 2.0.0 ``ExtendedKalmanFilter``, one per run, with the mean propagated
+through the nonlinear model and the model evaluated for the whole batch at once.
 
-filterpy's EKF propagates ``x ← F x + B u`` (linear); :class:`_NonlinearEKF` overrides
-``predict_x`` with ``x ← f(x, u)`` and the wrapper sets ``F`` to the Jacobian at the posterior
-mean before each ``predict``. ``predict_update`` is not used (it linearises at the wrong point).
-Jacobians come from the model (analytic for the quadrotor models).
+filterpy's EKF propagates ``x ← F x + B u`` (linear); :class:`_LinearisedEKF` overrides
+``predict_x`` with ``x ← f(x, u)``, and ``F`` is the Jacobian at the posterior mean before each
+``predict``. ``predict_update`` is not used (it linearises at the wrong point). Jacobians come
+from the model (analytic for the quadrotor models).
+
+Every filterpy step is unchanged; only *where* ``f``, ``F``, ``h`` and ``H`` are evaluated
+differs. :class:`FilterpyEKF` evaluates them for its own run (four model calls of one point per
+step), :class:`BatchedFilterpyEKF` (``estimator=ekf``) evaluates them once per step for every
+run of the batch and hands each run's filterpy EKF its rows. A model call costs about the same
+for one point as for a batch (numpy's per-call overhead dominates at this size), so that is
+where the EKF's time went (``docs/benchmarks.md``). The numbers are the same either way.
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ from typing import ClassVar
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from quadest.estimators.base import SingleRunEstimator
+from quadest.estimators.base import PerRunAdapter, SingleRunEstimator
 from quadest.models.base import FilterModel
 
 
@@ -26,25 +33,23 @@ class EKFParams:
     kind: str = "ekf"
 
 
-class _NonlinearEKF(ExtendedKalmanFilter):
-    def __init__(self, model: FilterModel) -> None:
-        super().__init__(dim_x=model.n, dim_z=model.m)
-        self.model = model
+class _LinearisedEKF(ExtendedKalmanFilter):
+    """filterpy's EKF whose time update moves the mean to ``predicted`` = f(x, u)."""
+
+    predicted: np.ndarray
 
     def predict_x(self, u=0) -> None:
-        self.x = self.model.f(self.x.T[None], u[None, :])[0].T
+        self.x = self.predicted
 
 
 class FilterpyEKF(SingleRunEstimator):
     """filterpy's EKF with nonlinear propagation, on one run of a :class:`FilterModel`."""
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
-    config_name = "ekf"
-    Params = EKFParams
 
     def __init__(self, model: FilterModel) -> None:
         super().__init__(model)
-        self.kf = _NonlinearEKF(model)
+        self.kf = _LinearisedEKF(dim_x=model.n, dim_z=model.m)
         self.kf.Q = model.Q.copy()
         self.kf.R = model.R.copy()
 
@@ -53,15 +58,24 @@ class FilterpyEKF(SingleRunEstimator):
         self.kf.P = np.array(P0, dtype=float)
 
     def predict(self, u: np.ndarray) -> None:
-        self.kf.F = self.model.F(self.kf.x.T, u[None, :])[0]
-        self.kf.predict(u=u)
+        x, u = self.kf.x.T, u[None, :]
+        self.predict_linearised(self.model.F(x, u)[0], self.model.f(x[None], u)[0, 0])
 
-    def update(self, z: np.ndarray, u: np.ndarray) -> None:
-        self.kf.update(
-            np.asarray(z, dtype=float).reshape(-1, 1),
-            HJacobian=lambda x: self.model.H(x.T, u[None, :])[0],
-            Hx=lambda x: self.model.h(x.T[None], u[None, :])[0].T,
-        )
+    def predict_linearised(self, F: np.ndarray, fx: np.ndarray) -> None:
+        """Time update given ``F`` (n, n) and ``f`` (n,) evaluated at the current mean."""
+        self.kf.F = F
+        self.kf.predicted = fx.reshape(-1, 1)
+        self.kf.predict()
+
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        if sensor is not None:
+            raise NotImplementedError("the filterpy EKF baseline updates with the primary measurement only")
+        x, u = self.kf.x.T, u[None, :]
+        self.update_linearised(z, self.model.H(x, u)[0], self.model.h(x[None], u)[0, 0])
+
+    def update_linearised(self, z: np.ndarray, H: np.ndarray, hx: np.ndarray) -> None:
+        """Measurement update given ``H`` (m, n) and ``h`` (m,) evaluated at the current mean."""
+        self.kf.update(np.asarray(z, dtype=float).reshape(-1, 1), HJacobian=lambda _: H, Hx=lambda _: hx.reshape(-1, 1))
 
     @property
     def mean(self) -> np.ndarray:
@@ -72,4 +86,45 @@ class FilterpyEKF(SingleRunEstimator):
         return self.kf.P
 
     def innovation(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.kf.y[:, 0], self.kf.S
+        return self.kf.y[:, 0], np.linalg.cholesky(self.kf.S)
+
+
+class BatchedFilterpyEKF(PerRunAdapter):
+    """One :class:`FilterpyEKF` per run; ``f``, ``F``, ``h`` and ``H`` evaluated once per step for
+    the whole batch at the runs' current means."""
+
+    batched: ClassVar[bool] = True
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    config_name = "ekf"
+    Params = EKFParams
+
+    def __init__(self, model: FilterModel) -> None:
+        super().__init__(model, FilterpyEKF)
+
+    def _points(self) -> np.ndarray | None:
+        """The runs' current means, failed runs parked on a live run's mean (their rows are
+        ignored; a NaN row would only raise floating-point warnings); ``None`` if none is live."""
+        if self.failed.all():
+            return None
+        x = self._mean
+        if self.failed.any():
+            x = x.copy()
+            x[self.failed] = x[np.argmin(self.failed)]
+        return x
+
+    def predict(self, u: np.ndarray) -> None:
+        x = self._points()
+        if x is None:
+            return
+        F, fx = self.model.F(x, u), self.model.f(x[:, None], u)[:, 0]
+        self._each(lambda i, filt: filt.predict_linearised(F[i], fx[i]))
+
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        if sensor is not None:  # each run's filter refuses further sensors and is flagged
+            super().update(z, u, sensor)
+            return
+        x = self._points()
+        if x is None:
+            return
+        H, hx = self.model.H(x, u), self.model.h(x[:, None], u)[:, 0]
+        self._each(lambda i, filt: filt.update_linearised(z[i], H[i], hx[i]))

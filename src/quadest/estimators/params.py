@@ -42,7 +42,9 @@ class Range:
         )
 
     def describe(self) -> str:
-        bounds = [(op, b) for op, b in ((">", self.gt), (">=", self.ge), ("<", self.lt), ("<=", self.le)) if b is not None]
+        bounds = [
+            (op, b) for op, b in ((">", self.gt), (">=", self.ge), ("<", self.lt), ("<=", self.le)) if b is not None
+        ]
         words = " and ".join(f"{op} {b:g}" for op, b in bounds)
         kind = "an integer" if self.integer else "a finite number"
         return f"must be {kind}" + (f" {words}" if words else "")

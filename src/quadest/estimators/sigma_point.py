@@ -62,7 +62,7 @@ class SigmaPointFilter(Estimator):
             raise ValueError(f"model '{model.name}' does not support augmented: true (its noise cannot join the state)")
         self.rule = rule
         self.augmented = bool(augmented)
-        self.sqrt_Q = psd_sqrt(model.Q, "Q")  # Sv = √Rv (5.13)
+        self.sqrt_Q = psd_sqrt(model.Q, "Q")  # Sv = √Rv (5.14)
         self.sqrt_R = psd_sqrt(model.R, "R")  # Sn = √Rn (5.14)
         n, q, r = model.n_err, model.process_noise_dim, model.measurement_noise_dim
         rule.validate(n + q + r if augmented else n)
@@ -102,7 +102,7 @@ class SigmaPointFilter(Estimator):
     # --- shared steps ---
 
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
-        """x̂0 = E[x0] and the spread from P0 (eqs 5.12–5.14)."""
+        """x̂0 = E[x0] (5.12) and the spread from P0 (5.13)."""
         self.x = np.array(x0, dtype=float, copy=True)
         B = self.x.shape[0]
         self._reset_failures(B)
@@ -248,7 +248,7 @@ class SquareRootSigmaPointFilter(SigmaPointFilter):
     capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "sqrt_covariance"})
 
     def _set_spread_from_P0(self, P0: np.ndarray) -> None:
-        self.S = np.linalg.cholesky(P0)  # Sx0 = chol(P0) (5.12)
+        self.S = np.linalg.cholesky(P0)  # Sx0 = chol(P0) (5.13)
 
     def _spread_state(self) -> np.ndarray:
         return self.S

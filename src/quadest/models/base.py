@@ -186,9 +186,17 @@ class FilterModel(ABC):
         """Measurement with explicit noise ``v`` (B, K, r): ``h(x, u) + v`` unless overridden."""
         return self.h(x, u) + v
 
+    def _noise_factor(self, C: np.ndarray) -> np.ndarray:
+        """``psd_sqrt(C)``, computed once per matrix value (sampling calls it every step)."""
+        cache = self.__dict__.setdefault("_noise_factors", {})
+        key = C.tobytes()
+        if key not in cache:
+            cache[key] = psd_sqrt(C, "noise covariance")
+        return cache[key]
+
     def sample_process_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
         """Draws of the process noise, shape ``(*size, q)``; N(0, Q) unless overridden."""
-        return _gaussian_sample(rng, self.Q, size)
+        return rng.standard_normal((*size, self.Q.shape[0])) @ self._noise_factor(self.Q).T
 
     def process_noise_logpdf(self, w: np.ndarray) -> np.ndarray:
         """Log-density of process-noise values ``w`` (..., q) → (...); N(0, Q) unless overridden."""
@@ -196,7 +204,7 @@ class FilterModel(ABC):
 
     def sample_measurement_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
         """Draws of the measurement noise, shape ``(*size, r)``; N(0, R) unless overridden."""
-        return _gaussian_sample(rng, self.R, size)
+        return rng.standard_normal((*size, self.R.shape[0])) @ self._noise_factor(self.R).T
 
     def measurement_noise_logpdf(self, v: np.ndarray) -> np.ndarray:
         """Log-density of measurement-noise values ``v`` (..., r) → (...); N(0, R) unless overridden."""
@@ -226,10 +234,6 @@ class FilterModel(ABC):
             setattr(other, name, getattr(self, name)[idx])
         other.batch_size = len(np.arange(self.batch_size)[idx])
         return other
-
-
-def _gaussian_sample(rng: np.random.Generator, C: np.ndarray, size: tuple[int, ...]) -> np.ndarray:
-    return rng.standard_normal((*size, C.shape[0])) @ psd_sqrt(C, "noise covariance").T
 
 
 def _gaussian_logpdf(e: np.ndarray, C: np.ndarray) -> np.ndarray:

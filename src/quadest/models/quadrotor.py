@@ -71,8 +71,7 @@ class QuadrotorFilterModel(FilterModel):
         accel_errors: TriadErrors,
         gyro_errors: TriadErrors,
     ) -> None:
-        if formulation not in FORMULATIONS:
-            raise ValueError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
+        self.state_names = self.formulation_state_names(formulation)
         self.name = f"quadrotor_{formulation}"
         self.params = params
         self.formulation = formulation
@@ -82,12 +81,10 @@ class QuadrotorFilterModel(FilterModel):
         self.gyro_errors = gyro_errors
         self.batch_size = accel_errors.bias.shape[0]
         if self.thesis:
-            self.state_names = _V + _RATE
             self.companion_names = _POS + _ANG
             self.companion_units = ("m",) * 3 + ("rad",) * 3
             self.nu = 7
         else:
-            self.state_names = _V + _ANG + _RATE
             self.companion_names = _POS
             self.companion_units = ("m",) * 3
             self.nu = 4
@@ -98,6 +95,14 @@ class QuadrotorFilterModel(FilterModel):
         self.Q = np.asarray(Q, dtype=float)
         self.R = np.asarray(R, dtype=float)
         self._rate_slice = slice(3, 6) if self.thesis else slice(6, 9)
+
+    @staticmethod
+    def formulation_state_names(formulation: str) -> tuple[str, ...]:
+        """The filter state of a formulation, without building a model: ``thesis`` (6) or
+        ``augmented`` (9)."""
+        if formulation not in FORMULATIONS:
+            raise ValueError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
+        return _V + _RATE if formulation == "thesis" else _V + _ANG + _RATE
 
     def _per_run_arrays(self) -> tuple[str, ...]:
         return ("accel_errors", "gyro_errors")

@@ -2,13 +2,23 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from quadest.config.schema import LinearModelConf, QuadrotorModelConf, UNGMModelConf
-from quadest.errors import ConfigError
-from quadest.montecarlo import MonteCarloData, build_quadrotor_data
+from quadest.config.schema import (
+    LinearModelConf,
+    QuadrotorModelConf,
+    Seed001RatesModelConf,
+    UNGMModelConf,
+    UPFBenchmarkModelConf,
+)
+from quadest.models.config_checks import validate_linear, validate_quadrotor, validate_ungm
+from quadest.models.quadrotor import QuadrotorFilterModel
+from quadest.models.quadrotor_data import build_quadrotor_data
+from quadest.models.seed001_rates import build_seed001_rates_data, validate_seed001_rates
+from quadest.models.upf_benchmark import build_upf_benchmark_data, validate_upf_benchmark
+from quadest.models.validation import build_linear_data, build_ungm_data
+from quadest.montecarlo import MonteCarloData
 
 
 @dataclass(frozen=True)
@@ -23,50 +33,29 @@ class ModelSpec:
     uses_quadrotor_groups: bool = False
 
 
-def _positive(key: str, value: float, what: str = "must be > 0") -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ConfigError(key, value, what)
-
-
-def _validate_linear(cfg) -> None:
-    m = cfg.model
-    _positive("model.acceleration_psd", m.acceleration_psd)
-    _positive("model.position_noise_std", m.position_noise_std)
-    if not -1 < m.measurement_correlation < 1:
-        raise ConfigError("model.measurement_correlation", m.measurement_correlation, "must lie in (-1, 1)")
-    for key in ("initial_state", "initial_std"):
-        if len(m[key]) != 4:
-            raise ConfigError(f"model.{key}", list(m[key]), "must list 4 values (px, py, vx, vy)")
-    for i, v in enumerate(m.initial_std):
-        _positive(f"model.initial_std[{i}]", v)
-    if not -1 / 3 < m.initial_correlation < 1:
-        raise ConfigError("model.initial_correlation", m.initial_correlation, "must lie in (-1/3, 1) for n=4")
-
-
-def _validate_ungm(cfg) -> None:
-    m = cfg.model
-    _positive("model.Q", m.Q, "must be > 0 (process noise variance)")
-    _positive("model.R", m.R, "must be > 0 (measurement noise variance)")
-    _positive("model.P0", m.P0, "must be > 0 (initial variance of the filters)")
-    if not (math.isfinite(m.x0_var) and m.x0_var >= 0):
-        raise ConfigError("model.x0_var", m.x0_var, "must be >= 0 (0: a deterministic initial state)")
-
-
 def model_specs() -> dict[str, ModelSpec]:
-    from quadest.config.validate import validate_quadrotor
-    from quadest.models.validation import build_linear_data, build_ungm_data
-
     return {
         "quadrotor": ModelSpec(
             QuadrotorModelConf,
             build_quadrotor_data,
-            lambda cfg: 6 if cfg.model.formulation == "thesis" else 9,
+            lambda cfg: len(QuadrotorFilterModel.formulation_state_names(cfg.model.formulation)),
             validate_quadrotor,
             True,
         ),
-        "linear": ModelSpec(LinearModelConf, build_linear_data, lambda cfg: 4, _validate_linear),
-        "ungm": ModelSpec(UNGMModelConf, build_ungm_data, lambda cfg: 1, _validate_ungm),
+        "linear": ModelSpec(LinearModelConf, build_linear_data, lambda cfg: 4, validate_linear),
+        "ungm": ModelSpec(UNGMModelConf, build_ungm_data, lambda cfg: 1, validate_ungm),
+        "upf_benchmark": ModelSpec(
+            UPFBenchmarkModelConf, build_upf_benchmark_data, lambda cfg: 1, validate_upf_benchmark
+        ),
+        "seed001_rates": ModelSpec(
+            Seed001RatesModelConf, build_seed001_rates_data, lambda cfg: 3, validate_seed001_rates, True
+        ),
     }
+
+
+def state_dimension(cfg) -> int:
+    """State dimension of the configured filter model."""
+    return model_specs()[cfg.model.name].state_dimension(cfg)
 
 
 def build_data(cfg) -> MonteCarloData:

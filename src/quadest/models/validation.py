@@ -18,7 +18,10 @@ import numpy as np
 
 from quadest.models.base import FilterModel
 from quadest.models.functional import LinearGaussianModel
-from quadest.montecarlo import MonteCarloData, initial_covariance, run_streams, sample_count
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.data import sample_count
+from quadest.montecarlo.initial import draw_initial_estimates, initial_covariance
+from quadest.montecarlo.streams import run_seed_sequences, run_streams
 
 
 def constant_velocity_model(cfg, runs: int) -> LinearGaussianModel:
@@ -87,8 +90,8 @@ def _simulate(model: FilterModel, x0: np.ndarray, inputs: np.ndarray, streams) -
 
 
 def _data(cfg, model, x0_true, x0_est, P0, inputs) -> MonteCarloData:
-    runs = int(cfg.runs)
-    streams = run_streams(int(cfg.seed), runs)
+    runs, seed = int(cfg.runs), int(cfg.seed)
+    streams = run_streams(seed, runs)
     x, z = _simulate(model, x0_true, inputs, streams)
     K1 = inputs.shape[1]
     time = np.arange(K1) * float(cfg.sample_period)
@@ -102,7 +105,8 @@ def _data(cfg, model, x0_true, x0_est, P0, inputs) -> MonteCarloData:
         "scenario": "",
         "encoder_resolution": np.nan,
     }
-    return MonteCarloData(model, time, x, empty, inputs, z, x0_est, P0, np.zeros((runs, 0)), labels)
+    estimator_seeds = run_seed_sequences(seed, runs)["estimator"]
+    return MonteCarloData(model, time, x, empty, inputs, z, x0_est, P0, np.zeros((runs, 0)), estimator_seeds, labels)
 
 
 def build_linear_data(cfg) -> MonteCarloData:
@@ -113,10 +117,7 @@ def build_linear_data(cfg) -> MonteCarloData:
     std = np.array(list(cfg.model.initial_std))
     P0 = initial_covariance(std, float(cfg.model.initial_correlation))
     x0 = np.broadcast_to(np.array(list(cfg.model.initial_state), dtype=float), (runs, 4))
-    L0 = np.linalg.cholesky(P0)
-    est = np.array(
-        [x0[i] + L0 @ rng.standard_normal(4) for i, rng in enumerate(run_streams(int(cfg.seed), runs)["initial"])]
-    )
+    est = draw_initial_estimates(x0, P0, run_streams(int(cfg.seed), runs)["initial"])
     return _data(cfg, model, x0, est, P0, np.zeros((runs, K + 1, 0)))
 
 

@@ -1,0 +1,102 @@
+"""Read a sweep folder: one row per job × estimator × state of every job that succeeded, the
+status of every expected job, and the swept parameters."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+# Columns the aggregate tables use themselves; an override with one of these names (``runs=20``)
+# becomes ``override.<name>``.
+OWN_COLUMNS = {"job", "status", "error", "commit", "estimator", "quantity", "state", "unit", "rmse_mean", "rmse_std",
+               "mse_mean", "runs", "diverged", "pooled_rmse", "pcrlb", "step_time_us", "mean_nees", "nees_in_band",
+               "mean_nis", "nis_in_band", "ci95_low", "ci95_high"}  # fmt: skip
+
+
+def _value(text: str):
+    """An override's value: a number where it is one (PyYAML reads ``1e-3`` as a string)."""
+    try:
+        return float(text) if "." in text or "e" in text.lower() else int(text)
+    except ValueError:
+        pass
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def expected_jobs(sweep_dir: Path) -> int | None:
+    """Number of jobs the sweep's grid holds (product of the comma lists in the sweeper params)."""
+    path = sweep_dir / "multirun.yaml"
+    if not path.is_file():
+        return None
+    cfg = yaml.safe_load(path.read_text()) or {}
+    params = ((cfg.get("hydra") or {}).get("sweeper") or {}).get("params") or {}
+    overrides = ((cfg.get("hydra") or {}).get("overrides") or {}).get("task") or []
+    sizes = [len(str(v).split(",")) for v in params.values()]
+    for item in overrides:
+        key, _, value = str(item).partition("=")
+        if "," in value and not value.startswith("[") and key not in params:
+            sizes.append(len(value.split(",")))
+    return int(np.prod(sizes)) if sizes else 1
+
+
+def load_sweep(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+    """(cells, jobs, parameter columns) of a sweep folder."""
+    rows, jobs, params = [], [], []
+    found = sorted((p for p in sweep_dir.iterdir() if p.is_dir() and p.name.isdigit()), key=lambda p: int(p.name))
+    for job_dir in found:
+        overrides_file = job_dir / ".hydra" / "overrides.yaml"
+        overrides = yaml.safe_load(overrides_file.read_text()) if overrides_file.is_file() else []
+        cell = {}
+        for item in overrides or []:
+            key, _, value = str(item).partition("=")
+            key = key.lstrip("+~")
+            key = f"override.{key}" if key in OWN_COLUMNS else key
+            if not key.startswith("hydra"):
+                cell[key] = _value(value)
+                if key not in params:
+                    params.append(key)
+        hydra_file = job_dir / ".hydra" / "hydra.yaml"
+        if hydra_file.is_file():
+            choices = ((yaml.safe_load(hydra_file.read_text()) or {}).get("hydra", {}).get("runtime", {})
+                       .get("choices", {}) or {})  # fmt: skip
+            for group, choice in choices.items():
+                if not group.startswith("hydra") and isinstance(choice, str):
+                    cell.setdefault(f"choice.{group}", choice)
+        summary_file = job_dir / "summary.json"
+        if not summary_file.is_file():
+            jobs.append({"job": int(job_dir.name), "status": "did not finish", "error": "", **cell})
+            continue
+        summary = json.loads(summary_file.read_text())
+        jobs.append(
+            {
+                "job": int(job_dir.name),
+                "status": summary.get("status", "unknown"),
+                "error": summary.get("error", ""),
+                "commit": summary.get("commit", ""),
+                **cell,
+            }
+        )
+        if summary.get("status") != "ok":
+            continue
+        table = pd.read_csv(job_dir / "rmse_summary.csv")
+        for name, est in summary["estimators"].items():
+            part = table[table["estimator"] == name].copy()
+            part["job"] = int(job_dir.name)
+            for key in ("step_time_us", "mean_nees", "nees_in_band", "mean_nis", "nis_in_band"):
+                part[key] = est.get(key)
+            for key, value in cell.items():
+                part[key] = value if not isinstance(value, list) else str(value)
+            rows.append(part)
+    expected = expected_jobs(sweep_dir)
+    present = {j["job"] for j in jobs}
+    total = max(expected or 0, max(present, default=-1) + 1)
+    for missing in sorted(set(range(total)) - present):
+        jobs.append({"job": missing, "status": "missing", "error": ""})
+    cells = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
+    return cells, pd.DataFrame(jobs).sort_values("job").reset_index(drop=True), params

@@ -1,0 +1,291 @@
+"""Particle filters batched over Monte Carlo runs, and the bootstrap filter (``estimator=pf``).
+
+Every run of a batch carries its own cloud: particles ``x`` (B, N, n) beside normalised
+log-weights (B, N), plus any per-particle arrays a proposal needs (the EKF proposal's P_i,
+(B, N, n, n)) in :attr:`ParticleFilter.particle_state`, which resampling carries along. Every
+operation works on all particles of all runs at once; the only Python loops run over the runs,
+to draw from each run's own generator (capability ``"random"``), so a run in a batch gets exactly
+the numbers it gets alone.
+
+One step (sequential importance sampling with resampling; Gordon, Salmond & Smith 1993; Doucet,
+Godsill & Andrieu 2000, "On sequential Monte Carlo sampling methods for Bayesian filtering"):
+
+1. the proposal draws ``x_k^i ~ q(· | x_{k−1}^i, y_k)`` (:meth:`ParticleFilter.propose`);
+2. incremental weights ``p(y_k | x_k^i) p(x_k^i | x_{k−1}^i) / q(x_k^i | x_{k−1}^i, y_k)``, with
+   the model's own noise densities: ``measurement_noise_logpdf(y − h(x))`` and
+   ``process_noise_logpdf(x − f(x_prev))`` (additive noise). For the transition prior as the
+   proposal (bootstrap) the last two cancel and only the likelihood is computed;
+3. the estimate, before (``estimate: weighted``) or after (``estimate: resampled``) resampling:
+   the weighted mean and covariance of the cloud;
+4. resampling (:mod:`quadest.numerics.resampling`), every step or when ESS < ``ess_threshold``·N;
+   optional roughening (Gordon et al. 1993, §4: Gaussian jitter with standard deviation
+   ``K E_j N^(−1/n)``, ``E_j`` the spread of coordinate j in the cloud, ``K = roughening``).
+
+``predict`` only records the input: the guided proposals need ``y_k``, so the whole step happens in
+``update``. A run whose weights all vanish (every likelihood underflows, or every proposed
+particle lies outside the transition's support) is flagged with that reason and parked on its
+initial cloud, never a crash.
+
+Outputs besides the moments: :attr:`ess` (B,) of the last step before resampling,
+:attr:`ess_sum`, :attr:`resample_count` and :attr:`outside_support` (B,) over the run: the
+number of proposed particles whose transition density was zero; :meth:`ParticleFilter.diagnostics`
+hands them to the runner, so they are columns of ``metrics.csv``. The covariance only summarises
+the cloud (capability ``"cloud"``): a collapsed cloud makes that step's NEES unavailable, it does
+not count as divergence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from quadest.errors import ConfigError
+from quadest.estimators.base import Estimator
+from quadest.estimators.params import parameter_problem, ranged
+from quadest.models.base import FilterModel
+from quadest.numerics import psd_sqrt
+from quadest.numerics.resampling import check_scheme, effective_sample_size, normalise_log_weights, resample
+
+SCHEDULES = ("every_step", "ess")
+ESTIMATES = ("weighted", "resampled")
+INITIAL_CLOUDS = ("sample", "point")
+
+
+@dataclass
+class ParticleParams:
+    """Options every particle filter shares (``conf/estimator/pf.yaml`` explains each)."""
+
+    kind: str = "pf"
+    particles: int = ranged(500, "particles per run", ge=2, integer=True)
+    resampling: str = "systematic"
+    schedule: str = "every_step"
+    ess_threshold: float = ranged(0.5, "resample when ESS < ess_threshold * N (schedule: ess)", gt=0.0, le=1.0)
+    estimate: str = "weighted"
+    roughening: float = ranged(0.0, "roughening constant K (0: none)", ge=0.0)
+    initial_cloud: str = "sample"
+
+
+def one_of(key: str, value: str, allowed: tuple[str, ...]) -> None:
+    """Raise :class:`ConfigError` unless ``value`` is in ``allowed``."""
+    if value not in allowed:
+        raise ConfigError(key, value, f"one of {list(allowed)}")
+
+
+def check_ranges(params_cls: type, values: dict, n: int) -> None:
+    """Raise :class:`ConfigError` for the first of ``values`` outside its ``Params`` range."""
+    problem = parameter_problem(params_cls, values, n)
+    if problem is not None:
+        raise ConfigError(*problem)
+
+
+def gather_particles(arrays: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """``arrays`` (B, N, ...) picked along the particle axis by ``indices`` (B, N)."""
+    shape = indices.shape + (1,) * (arrays.ndim - 2)
+    return np.take_along_axis(arrays, indices.reshape(shape), axis=1)
+
+
+def weighted_moments(x: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (B, n) and covariance (B, n, n) of clouds ``x`` (B, N, n) with weights ``w`` (B, N)
+    (particles of zero weight, possibly non-finite, are left out)."""
+    x = np.where(w[..., None] > 0, x, 0.0)
+    mean = np.einsum("bk,bki->bi", w, x)
+    d = np.where(w[..., None] > 0, x - mean[:, None, :], 0.0)
+    cov = np.einsum("bk,bki,bkj->bij", w, d, d)
+    return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
+
+
+class ParticleFilter(Estimator):
+    """The batched particle filter; a subclass sets the proposal by overriding :meth:`propose`.
+
+    Args:
+        model: the filter model, bound to a batch of B runs.
+        particles: N per run.
+        resampling: ``multinomial`` (roulette wheel), ``systematic``, ``stratified`` or ``residual``.
+        schedule: ``every_step``, or ``ess`` (resample when ESS < ``ess_threshold``·N).
+        ess_threshold: in (0, 1], used by ``schedule: ess``.
+        estimate: ``weighted`` (mean and covariance of the weighted cloud before resampling) or
+            ``resampled`` (of the cloud after resampling).
+        roughening: Gordon et al.'s constant K (0: none).
+        initial_cloud: ``sample`` (N draws from N(x0, P0)) or ``point`` (every particle at x0).
+    """
+
+    capabilities: ClassVar[frozenset[str]] = frozenset({"random", "cloud"})
+
+    def __init__(
+        self,
+        model: FilterModel,
+        particles: int = 500,
+        resampling: str = "systematic",
+        schedule: str = "every_step",
+        ess_threshold: float = 0.5,
+        estimate: str = "weighted",
+        roughening: float = 0.0,
+        initial_cloud: str = "sample",
+    ) -> None:
+        super().__init__(model)
+        check_ranges(
+            ParticleParams, {"particles": particles, "ess_threshold": ess_threshold, "roughening": roughening}, model.n
+        )
+        check_scheme(resampling)
+        one_of("schedule", schedule, SCHEDULES)
+        one_of("estimate", estimate, ESTIMATES)
+        one_of("initial_cloud", initial_cloud, INITIAL_CLOUDS)
+        if model.sensors or model.n_err != model.n:
+            raise ConfigError(
+                "model", model.name, "a model with vector states and one measurement (particle filters take no sensors)"
+            )
+        self.N = int(particles)
+        self.resampling, self.schedule, self.ess_threshold = resampling, schedule, float(ess_threshold)
+        self.estimate, self.roughening, self.initial_cloud = estimate, float(roughening), initial_cloud
+        self.particle_state: dict[str, np.ndarray] = {}
+
+    # --- the hook subclasses override ---
+
+    def propose(self, u_prev: np.ndarray, z: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """New particles (B, N, n) from ``self.x`` and the log proposal density at them (B, N);
+        ``None`` when the proposal is the transition prior (bootstrap: the transition density
+        cancels). A proposal may also replace entries of :attr:`particle_state`."""
+        w = self._per_run(lambda rng: self.model.sample_process_noise(rng, (self.N,)))
+        return self.model.f_noise(self.x, w, u_prev), None
+
+    # --- the filter ---
+
+    def _per_run(self, draw) -> np.ndarray:
+        """Stack ``draw(rng)`` over the runs' generators."""
+        return np.stack([draw(rng) for rng in self.rngs])
+
+    def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
+        B, n = x0.shape
+        if len(getattr(self, "rngs", ())) != B:
+            raise RuntimeError(f"{type(self).__name__} needs set_generators() with {B} generators before initialize")
+        self._reset_failures(B)
+        if self.initial_cloud == "sample":
+            L0 = np.stack([psd_sqrt(P, "P0") for P in P0])  # P0 may be singular (a state known exactly)
+            eps = self._per_run(lambda rng: rng.standard_normal((self.N, n)))
+            self.x = x0[:, None, :] + eps @ np.swapaxes(L0, -1, -2)
+        else:
+            self.x = np.repeat(x0[:, None, :], self.N, axis=1)
+        self.logw = np.full((B, self.N), -np.log(self.N))
+        self.log_increment = np.zeros((B, self.N))
+        self._u_prev = np.zeros((B, self.model.nu))
+        self.ess = np.full(B, float(self.N))
+        self.ess_sum = np.zeros(B)
+        self.resample_count = np.zeros(B, dtype=int)
+        self.outside_support = np.zeros(B, dtype=int)
+        self.step = 0
+        self._mean, self._cov = weighted_moments(self.x, np.exp(self.logw))
+        self._safe = {"x": self.x.copy()}
+
+    def diagnostics(self) -> dict[str, np.ndarray]:
+        """Per run: mean ESS over the steps, resampling count and proposals outside the
+        transition's support (the ``metrics.csv`` columns ``ess_mean``, ``resample_count``,
+        ``outside_support``)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ess_mean = self.ess_sum / self.step
+        return {"ess_mean": ess_mean, "resample_count": self.resample_count, "outside_support": self.outside_support}
+
+    def _save_safe_state(self) -> None:
+        """Remember the initial per-particle arrays, to park failed runs on (call after filling
+        :attr:`particle_state` in ``initialize``)."""
+        self._safe.update({k: v.copy() for k, v in self.particle_state.items()})
+
+    def predict(self, u: np.ndarray) -> None:
+        """Record the input of the previous sample; the step itself runs in :meth:`update`."""
+        self._u_prev = np.array(u, dtype=float, copy=True)
+
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        """The whole step (proposal, weights, estimate, resampling) with the primary measurement."""
+        self.step += 1
+        x_prev = self.x
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            x_new, log_q = self.propose(self._u_prev, z, u)
+            incr = self.model.measurement_noise_logpdf(z[:, None, :] - self.model.h(x_new, u))
+            if log_q is not None:
+                log_trans = self.model.process_noise_logpdf(x_new - self.model.f(x_prev, self._u_prev))
+                self.outside_support += np.sum(log_trans == -np.inf, axis=1)
+                incr = incr + log_trans - log_q
+        self.log_increment = incr
+        self.x = x_new
+        w, vanished = normalise_log_weights(self.logw + incr)
+        if vanished.any():
+            self.flag(np.flatnonzero(vanished), f"all particle weights vanished at step {self.step}")
+        self.ess = effective_sample_size(w)
+        self.ess_sum += self.ess
+        if self.estimate == "weighted":
+            self._mean, self._cov = weighted_moments(self.x, w)
+        due = np.ones_like(vanished) if self.schedule == "every_step" else self.ess < self.ess_threshold * self.N
+        runs = np.flatnonzero(due & ~self.failed)
+        if runs.size:
+            self.resample_runs(w, runs)
+            w[runs] = 1.0 / self.N
+            self.resample_count[runs] += 1
+        with np.errstate(divide="ignore"):
+            self.logw = np.log(w)
+        if self.estimate == "resampled":
+            self._mean, self._cov = weighted_moments(self.x, w)
+        self._park_failed()
+
+    def resample_runs(self, w: np.ndarray, runs: np.ndarray) -> None:
+        """Replace the clouds of ``runs`` by equally weighted ones drawn from weights ``w`` (B, N),
+        then roughen them."""
+        rngs = [self.rngs[i] for i in runs]
+        self.redraw(w[runs], runs, rngs)
+        if self.roughening > 0:
+            self._roughen(runs, rngs)
+
+    def redraw(self, w: np.ndarray, runs: np.ndarray, rngs: list[np.random.Generator]) -> None:
+        """The resampling proper: new clouds for ``runs`` from their weights ``w`` (R, N), carrying
+        :attr:`particle_state` (a filter with another resampling overrides this)."""
+        idx = resample(self.resampling, w, rngs)
+        self.x[runs] = gather_particles(self.x[runs], idx)
+        self.carry(runs, idx)
+
+    def carry(self, runs: np.ndarray, idx: np.ndarray) -> None:
+        """Pick the per-particle arrays of ``runs`` by ancestor indices ``idx`` (R, N)."""
+        for arr in self.particle_state.values():
+            arr[runs] = gather_particles(arr[runs], idx)
+
+    def _roughen(self, runs: np.ndarray, rngs: list[np.random.Generator]) -> None:
+        x = self.x[runs]
+        n = x.shape[-1]
+        sigma = self.roughening * (x.max(axis=1) - x.min(axis=1)) * self.N ** (-1.0 / n)  # (R, n)
+        eps = np.stack([rng.standard_normal((self.N, n)) for rng in rngs])
+        self.x[runs] = x + eps * sigma[:, None, :]
+
+    def _park_failed(self) -> None:
+        """Failed runs restart from their initial cloud, so they cannot disturb the others."""
+        bad = ~(np.isfinite(self._mean).all(-1) & np.isfinite(self._cov).all((-2, -1)))
+        if bad.any():
+            self.flag(np.flatnonzero(bad), "non-finite particle mean or covariance")
+        if self.failed.any():
+            f = self.failed
+            self.x[f] = self._safe["x"][f]
+            for key, arr in self.particle_state.items():
+                arr[f] = self._safe[key][f]
+            self.logw[f] = -np.log(self.N)
+            self._mean[f], self._cov[f] = weighted_moments(self.x[f], np.exp(self.logw[f]))
+
+    @property
+    def mean(self) -> np.ndarray:
+        return self._mean
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return self._cov
+
+
+@dataclass
+class PFParams(ParticleParams):
+    """Configuration of ``estimator=pf``: the bootstrap filter (see :class:`ParticleParams`)."""
+
+    kind: str = "pf"
+
+
+class BootstrapPF(ParticleFilter):
+    """Bootstrap / SIR particle filter (Gordon, Salmond & Smith 1993): the transition prior is the
+    proposal, so the incremental weight is the likelihood ``p(y_k | x_k^i)``."""
+
+    config_name = "pf"
+    Params = PFParams

@@ -1,0 +1,38 @@
+"""Per-run random streams: common random numbers for every estimator.
+
+Randomness comes only from ``np.random.SeedSequence(seed)``: it spawns one child per run, and
+each run's child spawns one stream per purpose in :data:`STREAMS` (start point, accelerometer
+errors, gyro errors, accelerometer noise, gyro noise, encoder noise, initial estimate, process
+and measurement noise of the validation models, the estimators' own randomness). So every
+estimator sees the same draws, run ``i`` is the same whatever the number of runs, and a sweep over
+``sensor.error_scale`` scales the same standard-normal draws. Stream ``j`` of run ``i`` is
+``SeedSequence(seed, spawn_key=(i, j))``, so appending a stream changes no existing draw.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+STREAMS = (
+    "start",
+    "accel_errors",
+    "gyro_errors",
+    "accel_noise",
+    "gyro_noise",
+    "encoder",
+    "initial",
+    "process",
+    "measurement",
+    "estimator",
+)  # append only: existing streams keep their draws
+
+
+def run_seed_sequences(seed: int, runs: int) -> dict[str, list[np.random.SeedSequence]]:
+    """One seed sequence per (purpose, run), all from ``SeedSequence(seed)``."""
+    per_run = [child.spawn(len(STREAMS)) for child in np.random.SeedSequence(seed).spawn(runs)]
+    return {name: [ss[j] for ss in per_run] for j, name in enumerate(STREAMS)}
+
+
+def run_streams(seed: int, runs: int) -> dict[str, list[np.random.Generator]]:
+    """One generator per (purpose, run), all from ``SeedSequence(seed)``."""
+    return {name: [np.random.default_rng(s) for s in seqs] for name, seqs in run_seed_sequences(seed, runs).items()}

@@ -1,0 +1,262 @@
+"""Re-introduce known bugs one at a time and check that the tests named for each go red.
+
+Usage, from the repository root::
+
+    python tools/mutations.py            # every mutation, after a baseline run of the named tests
+    python tools/mutations.py --list     # the mutations and the tests that must catch them
+    python tools/mutations.py NAME ...   # only these mutations
+    python tools/mutations.py --show     # with the end of pytest's report (why it failed)
+
+For each mutation the working tree (tracked files plus untracked, non-ignored ones) is copied
+to a temporary directory, one exact piece of text in one file is replaced (it must occur exactly
+once, or the script stops and says so), and only the named tests run there with
+``python -m pytest -x -q`` and ``PYTHONPATH=<copy>/src``, after checking that ``quadest`` is
+imported from the copy. A mutation is *caught* when pytest reports failing tests, *MISSED* when
+they pass. The exit status is non-zero if any mutation is missed or a run errors. Before the
+mutations, the union of the named tests runs once on the unmutated copy: a test that fails
+without any bug catches nothing.
+
+The list covers the gaps of issue 15 (each had no failing test before) and classic sigma-point
+bugs. docs/testing.md describes it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class Mutation:
+    """Replace ``old`` (which must occur exactly once in ``file``) by ``new``; ``tests`` must fail."""
+
+    name: str
+    file: str
+    old: str
+    new: str
+    tests: tuple[str, ...]
+
+
+GAPS = "tests/test_science_gaps.py::"
+NONLINEAR = "tests/test_conformance_nonlinear.py::"
+VALIDATION = "tests/test_validation_models.py::"
+IDENTITIES = "tests/test_srukf_identities.py::"
+
+MUTATIONS = (
+    Mutation(
+        "diverged runs kept in the RMSE",
+        "src/quadest/runner.py",
+        "out = np.sqrt(out) if root else out\n        out[self.diverged] = np.nan\n",
+        "out = np.sqrt(out) if root else out\n",
+        (GAPS + "test_a_run_diverging_midway_counts_only_its_steps_before_divergence",
+         GAPS + "test_summary_tables_exclude_the_diverged_runs"),
+    ),
+    Mutation(
+        "errors accumulated after divergence",
+        "src/quadest/runner.py",
+        "alive = ~diverged\n",
+        "alive = np.ones_like(diverged)\n",
+        (GAPS + "test_a_run_diverging_midway_counts_only_its_steps_before_divergence",),
+    ),
+    Mutation(
+        "truth-side MIMU errors doubled",
+        "src/quadest/sensors/mimu.py",
+        "return errors.apply(y_true) + walk + noise",
+        "return 2.0 * errors.apply(y_true) - y_true + walk + noise",
+        (GAPS + "test_measure_triad_applies_the_deterministic_errors_as_documented",),
+    ),
+    Mutation(
+        "data drawn from a seed that depends on the estimator kind",
+        "src/quadest/job.py",
+        "(label, node, data, float(cfg.divergence_bound)",
+        '(label, node, build_data(OmegaConf.merge(cfg, {"seed": int(cfg.seed) + sum(map(ord, '
+        'node.get("kind", label)))})), float(cfg.divergence_bound)',
+        (GAPS + "test_estimators_of_every_kind_see_the_same_draws_on_the_linear_model",
+         GAPS + "test_estimators_of_every_kind_get_identical_data_on_the_quadrotor"),
+    ),
+    Mutation(
+        "PCRLB 25 % too high (filters would 'beat' a true bound)",
+        "src/quadest/pcrlb.py",
+        "out[k] = np.diag(np.linalg.inv(J))",
+        "out[k] = 1.25 * np.diag(np.linalg.inv(J))",
+        (VALIDATION + "test_no_filter_beats_the_pcrlb[linear-100]",),
+    ),
+    Mutation(
+        "PCRLB called a bound on the quadrotor",
+        "src/quadest/pcrlb.py",
+        "return model_name in TRUTH_FROM_FILTER_MODEL",
+        "return True",
+        (VALIDATION + "test_pcrlb_is_called_a_bound_only_where_it_is_one",),
+    ),
+    Mutation(
+        "W0(c) taken from the mean weights",
+        "src/quadest/numerics/sigma_points.py",
+        "wc[0] = lam / (n + lam) + (1.0 - alpha**2 + beta)",
+        "wc[0] = lam / (n + lam)",
+        (NONLINEAR + "test_ut_filters_have_the_closed_form_moments",),
+    ),
+    Mutation(
+        "beta ignored",
+        "src/quadest/numerics/sigma_points.py",
+        "wc[0] = lam / (n + lam) + (1.0 - alpha**2 + beta)",
+        "wc[0] = lam / (n + lam) + (1.0 - alpha**2)",
+        (NONLINEAR + "test_ut_filters_have_the_closed_form_moments",),
+    ),
+    Mutation(
+        "wrong sign of the W0(c) rank-one term",
+        "src/quadest/numerics/rules.py",
+        "1.0 if wc0 >= 0 else -1.0",
+        "1.0",
+        (NONLINEAR + "test_ut_filters_have_the_closed_form_moments",
+         IDENTITIES + "test_srukf_matches_extended_precision_ukf_at_small_alpha"),
+    ),
+    Mutation(
+        "W0(c) downdate skipped",
+        "src/quadest/numerics/rules.py",
+        "return [(np.sqrt(abs(wc0)) * D[..., 0, :, None], 1.0 if wc0 >= 0 else -1.0)]",
+        "return []",
+        (NONLINEAR + "test_ut_filters_have_the_closed_form_moments",),
+    ),
+    Mutation(
+        "square-root filter reports Sᵀ S instead of S Sᵀ (covariance only)",
+        "src/quadest/estimators/sigma_point.py",
+        "return self.S @ _t(self.S)",
+        "return _t(self.S) @ self.S",
+        (IDENTITIES + "test_srukf_matches_extended_precision_ukf_at_small_alpha",),
+    ),
+    Mutation(
+        "UT sweep stops passing beta to the UKF",
+        "experiments/sweep_ut_params.yaml",
+        "\n  ukf:\n    alpha: ${sweep.alpha}\n    beta: ${sweep.beta}\n",
+        "\n  ukf:\n    alpha: ${sweep.alpha}\n",
+        ("tests/test_sweeps.py::test_every_swept_key_reaches_what_it_names[sweep_ut_params]",),
+    ),
+    Mutation(
+        "sensor.error_scale not applied",
+        "src/quadest/models/quadrotor_config.py",
+        ".scaled(error_scale)",
+        "",
+        ("tests/test_sweeps.py::test_every_swept_key_reaches_what_it_names[sweep_sensor_errors]",),
+    ),
+)  # fmt: skip
+
+
+def tree_files() -> list[str]:
+    """Tracked files that still exist, plus untracked files that are not ignored."""
+    out = subprocess.run(
+        ["git", "ls-files", "--cached", "--others", "--exclude-standard", "-z"],
+        cwd=ROOT, capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    return sorted({f for f in out.stdout.split("\0") if f and (ROOT / f).is_file()})
+
+
+def copy_tree(files: list[str], dest: Path) -> None:
+    for f in files:
+        target = dest / f
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / f, target)
+
+
+def apply(mutation: Mutation, dest: Path) -> None:
+    path = dest / mutation.file
+    if not path.is_file():
+        sys.exit(f"mutations.py: {mutation.name!r}: {mutation.file} does not exist; update the mutation")
+    text = path.read_text()
+    count = text.count(mutation.old)
+    if count != 1:
+        sys.exit(
+            f"mutations.py: {mutation.name!r}: the text to replace occurs {count} times in {mutation.file} "
+            f"(must be exactly once); update the mutation. Text: {mutation.old!r}"
+        )
+    path.write_text(text.replace(mutation.old, mutation.new))
+
+
+def environment(dest: Path) -> dict[str, str]:
+    env = {**os.environ, "PYTHONPATH": str(dest / "src"), "PYTHONDONTWRITEBYTECODE": "1"}
+    env.pop("PYTEST_ADDOPTS", None)
+    return env
+
+
+def check_import_from(dest: Path) -> None:
+    """Make sure the copy, not the installed tree, is what the tests will import."""
+    out = subprocess.run(
+        [sys.executable, "-c", "import quadest; print(quadest.__file__)"],
+        cwd=dest, env=environment(dest), capture_output=True, text=True,
+    )  # fmt: skip
+    where = Path(out.stdout.strip() or "?").resolve()
+    if dest.resolve() not in where.parents:
+        sys.exit(f"mutations.py: quadest was imported from {where}, not from the copy {dest}: {out.stderr.strip()}")
+
+
+def run_tests(dest: Path, tests: tuple[str, ...]) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests],
+        cwd=dest, env=environment(dest), capture_output=True, text=True,
+    )  # fmt: skip
+
+
+def in_copy(files: list[str], mutation: Mutation | None, tests: tuple[str, ...]) -> subprocess.CompletedProcess:
+    with tempfile.TemporaryDirectory(prefix="quadest-mutation-") as tmp:
+        dest = Path(tmp)
+        copy_tree(files, dest)
+        if mutation is not None:
+            apply(mutation, dest)
+        check_import_from(dest)
+        return run_tests(dest, tests)
+
+
+def last_line(proc: subprocess.CompletedProcess) -> str:
+    lines = [ln for ln in (proc.stdout + proc.stderr).splitlines() if ln.strip()]
+    return lines[-1] if lines else ""
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("names", nargs="*", help="run only the mutations with these names")
+    parser.add_argument("--list", action="store_true", help="list the mutations and exit")
+    parser.add_argument("--no-baseline", action="store_true", help="skip the run of the tests without mutation")
+    parser.add_argument("--show", action="store_true", help="print the end of pytest's report for each mutation")
+    args = parser.parse_args(argv)
+    chosen = [m for m in MUTATIONS if not args.names or m.name in args.names]
+    unknown = set(args.names) - {m.name for m in MUTATIONS}
+    if unknown:
+        parser.error(f"unknown mutations {sorted(unknown)}; see --list")
+    if args.list:
+        for m in chosen:
+            print(f"{m.name}\n    {m.file}\n    " + "\n    ".join(m.tests))
+        return 0
+    files = tree_files()
+    if not args.no_baseline:
+        union = tuple(dict.fromkeys(t for m in chosen for t in m.tests))
+        base = in_copy(files, None, union)
+        if base.returncode != 0:
+            print(f"baseline: the named tests fail without any mutation: {last_line(base)}")
+            print(base.stdout[-3000:])
+            return 2
+        print(f"baseline: {last_line(base)}")
+    failures = 0
+    for m in chosen:
+        proc = in_copy(files, m, m.tests)
+        if proc.returncode == 1:
+            verdict = "caught"
+        elif proc.returncode == 0:
+            verdict, failures = "MISSED", failures + 1
+        else:
+            verdict, failures = f"ERROR (pytest exit {proc.returncode})", failures + 1
+        print(f"{verdict:>8s}  {m.name}  [{last_line(proc)}]")
+        if args.show:
+            print("\n".join("          " + ln for ln in proc.stdout.splitlines()[-25:]))
+    print(f"{len(chosen) - failures} of {len(chosen)} mutations caught")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
