@@ -103,7 +103,7 @@ def test_srukf_is_the_square_root_filter_with_the_unscented_rule():
 
 
 def test_square_root_central_difference_filter_never_downdates(monkeypatch):
-    """van der Merwe 2004, Algorithm 11: every SR-CDKF column is added; a call of cholupdate with a
+    """van der Merwe 2004 (SR-CDKF): every SR-CDKF column is added; a call of cholupdate with a
     negative sign would mean a downdate crept in."""
     import quadest.estimators.sigma_point as sp
 
@@ -132,7 +132,7 @@ def test_square_root_central_difference_filter_never_downdates(monkeypatch):
 def test_augmented_time_update_equals_additive_with_shifted_kappa(rule, rule_aug):
     """κ_aug = κ − (q + r) keeps γ² = α²(n + κ); the noise points then carry Q exactly and the
     measurement-noise points only move weight to the centre, so one predict gives the same mean
-    and covariance as the additive filter (van der Merwe 2004, §3.5.1)."""
+    and covariance as the additive filter (van der Merwe 2004)."""
     n = 4
     model, x0, P0, u, _ = _problem(n)
     q, r = model.process_noise_dim, model.measurement_noise_dim
@@ -227,8 +227,8 @@ def test_ghkf_with_ten_points_is_exact_on_a_scalar_polynomial():
 
 def test_dd1_keeps_first_order_terms_only_and_cdkf_the_second_order_too():
     """x ~ N(m, P), f(x) = x²: E[f] = m² + P and Var[f] = 4m²P + 2P². The CDKF (DD2) is exact for
-    the mean of a quadratic and gets 4m²P + (h² − 1)P² for the variance (Nørgaard et al. 2000,
-    eq. 44 with n = 1); DD1 gives f(m) = m² and 4m²P (first-order terms only)."""
+    the mean of a quadratic and gets 4m²P + (h² − 1)P² for the variance (by hand, n = 1:
+    A1 = 2m√P, A2 = √(h² − 1)P); DD1 gives f(m) = m² and 4m²P (first-order terms only)."""
     m_, P, h = 0.8, 0.3, 1.7
     model = FunctionalModel(lambda x, u: x**2, lambda x, u: x, np.array([[1e-12]]), np.array([[1.0]]))
     for cls, mean, var in (

@@ -1,7 +1,7 @@
 """Central-difference Kalman filters, covariance (CDKF) and square-root (SR-CDKF) forms, batched.
 
-Nørgaard, Poulsen & Ravn 2000 (Automatica 36(11)); van der Merwe 2004 (OHSU thesis, §3.4 and
-Algorithm 11). Points ``x̂, x̂ ± h S_i``; the covariance comes from divided differences
+Nørgaard, Poulsen & Ravn 2000 (Automatica 36(11)); van der Merwe 2004 (OHSU thesis, the CDKF and
+SR-CDKF). Points ``x̂, x̂ ± h S_i``; the covariance comes from divided differences
 (:class:`~quadest.numerics.rules.CentralDifferenceRule`), so the square-root form never downdates:
 its posterior factor is ``qr{[S⁻ − K Y1, K Y2, K √R]}``.
 """
@@ -41,7 +41,7 @@ class CDKF(SigmaPointKalmanFilter):
 
 
 class SRCDKF(SquareRootSigmaPointFilter):
-    """Square-root central-difference Kalman filter (van der Merwe 2004, Algorithm 11)."""
+    """Square-root central-difference Kalman filter (van der Merwe 2004)."""
 
     config_name = "srcdkf"
     Params = CentralDifferenceParams

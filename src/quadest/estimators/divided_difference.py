@@ -1,5 +1,5 @@
-"""First-order divided-difference filter DD1 (Nørgaard, Poulsen & Ravn 2000, Automatica 36(11),
-§3.3), square-root form: the worked example of a user-written integration rule in
+"""First-order divided-difference filter DD1 (Nørgaard, Poulsen & Ravn 2000, Automatica 36(11)),
+square-root form: the worked example of a user-written integration rule in
 ``docs/plugins.md``. This module and ``conf/estimator/dd1.yaml`` are all it takes.
 
 DD1 keeps only the first-order divided differences of the central-difference rule: the mean is

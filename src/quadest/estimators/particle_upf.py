@@ -6,7 +6,7 @@ from ``(x_i, P_i)`` with ``y_k`` gives ``(μ_i, P̂_i)``; the particle is drawn 
 and weighted like the EKPF's (:mod:`quadest.estimators.particle_ekpf`, whose sampling, weights
 and carried ``P_i`` this filter shares; only the proposal moments differ).
 
-With ``augmented: true`` (the paper's choice; van der Merwe 2004, §3.5.1) the proposal's noise
+With ``augmented: true`` (the paper's choice; van der Merwe 2004) the proposal's noise
 joins the sigma-point state ``[x; v; n]`` with covariance ``diag(P_i, Q_p, R_p)`` and goes through
 the model's ``f_noise`` and ``h_noise``; otherwise ``Q_p`` and ``R_p`` are added to the
 transformed covariances. The points and weights are the sigma-point family's

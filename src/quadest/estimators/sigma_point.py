@@ -9,7 +9,7 @@ integration rule (:mod:`quadest.numerics.rules`), batched over Monte Carlo runs.
   (5.19, 5.24), the gain by two triangular solves (5.26) and the posterior downdate by ``K Sy``
   (5.28–5.29), unless the rule gives its own posterior columns (central differences: no downdate).
 
-Both take ``augmented=True`` (van der Merwe 2004, §3.5.1; the EKF/UKF toolbox's "UKF2"): the
+Both take ``augmented=True`` (van der Merwe 2004; the EKF/UKF toolbox's "UKF2"): the
 process and measurement noise join the sigma-point state ``[x; w; v]`` (dimension n + q + r),
 the points are drawn once per step in the time update and reused in the measurement update, and
 the model's ``f_noise``/``h_noise`` take the noise (for models whose noise is not additive). A
@@ -117,7 +117,7 @@ class SigmaPointFilter(Estimator):
 
     def _points(self, noise_factors: list[np.ndarray]) -> np.ndarray:
         """Points (B, L, n + Σ noise dims): ``x ⊞ offset`` for the state part, the noise parts as
-        offsets from zero (eqs 5.15, 5.20; augmented: van der Merwe 2004, eq. 3.170)."""
+        offsets from zero (eqs 5.15, 5.20; augmented: van der Merwe 2004)."""
         S = self._factor()
         if noise_factors:
             S = _block_diagonal([S, *(self._broadcast(F) for F in noise_factors)])

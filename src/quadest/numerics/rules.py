@@ -20,7 +20,7 @@ Rules:
 
 - :class:`UnscentedRule`: scaled symmetric UT (thesis eqs 5.1–5.9; van der Merwe 2004).
 - :class:`CentralDifferenceRule`: Nørgaard, Poulsen & Ravn 2000 (Automatica 36(11)); van der
-  Merwe 2004, §3.4 (CDKF) and Algorithm 11 (SR-CDKF).
+  Merwe 2004 (OHSU thesis: the CDKF and the SR-CDKF).
 - :class:`CubatureRule`: third-degree spherical–radial cubature, Arasaratnam & Haykin 2009
   (IEEE TAC 54(6)), eqs 36–38.
 - :class:`FifthDegreeCubatureRule`: Jia, Xin & Cheng 2013 (Automatica 49(2)), 2n² + 1 points.
@@ -158,7 +158,7 @@ def _cached_ut(n: int, alpha: float, beta: float, kappa: float):
 
 @dataclass(frozen=True)
 class CentralDifferenceRule(IntegrationRule):
-    """Central differences with step ``h`` (Nørgaard et al. 2000; van der Merwe 2004, §3.4).
+    """Central differences with step ``h`` (Nørgaard et al. 2000; van der Merwe 2004).
 
     Points ``x̂, x̂ ± h S_i``; mean weights ``W0 = (h² − n)/h²``, ``Wi = 1/(2h²)``. The covariance is
     built from first- and second-order divided differences, not from weights:
@@ -209,7 +209,7 @@ class CentralDifferenceRule(IntegrationRule):
         return self._first_order(DX, n) @ _t(self._first_order(DY, n))
 
     def posterior_columns(self, DX: np.ndarray, DY: np.ndarray, K: np.ndarray, n: int) -> np.ndarray:
-        """``[X1 − K Y1, X2, K Y2]`` (van der Merwe 2004, Algorithm 11, with ``X1 = S⁻``, ``X2 = 0``
+        """``[X1 − K Y1, X2, K Y2]`` (van der Merwe 2004, the SR-CDKF, with ``X1 = S⁻``, ``X2 = 0``
         for redrawn points): with ``K √R`` appended, its QR is the factor of ``P⁻ − K Pyy Kᵀ``."""
         X1, X2 = self._first_order(DX, n), self._second_order(DX, n)
         Y1, Y2 = self._first_order(DY, n), self._second_order(DY, n)
