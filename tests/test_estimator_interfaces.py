@@ -289,27 +289,17 @@ def test_filterpy_ukf_innovation_is_a_factor_like_every_estimators():
     assert np.allclose(L[0] @ L[0].T, S, rtol=1e-12) and np.allclose(L[0], np.tril(L[0]))
 
 
-class _Collapsed(Estimator):
-    """Estimates the truth's neighbourhood with a zero covariance (a cloud collapsed onto one
+class _Collapsed(_Draws):
+    """Keeps its start as the estimate with a zero covariance (a cloud collapsed onto one
     particle) and reports a per-run diagnostic."""
 
+    capabilities: ClassVar[frozenset[str]] = frozenset()
+
     def initialize(self, x0, P0):
-        self.x, self.P = x0.copy(), np.zeros_like(P0)
-        self._reset_failures(len(x0))
+        super().initialize(x0, np.zeros_like(P0))
 
     def predict(self, u):
         pass
-
-    def update(self, z, u, sensor=None):
-        pass
-
-    @property
-    def mean(self):
-        return self.x
-
-    @property
-    def covariance(self):
-        return self.P
 
     def diagnostics(self):
         return {"ess_mean": np.arange(len(self.x), dtype=float)}

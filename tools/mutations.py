@@ -49,6 +49,9 @@ GAPS = "tests/test_science_gaps.py::"
 NONLINEAR = "tests/test_conformance_nonlinear.py::"
 VALIDATION = "tests/test_validation_models.py::"
 IDENTITIES = "tests/test_srukf_identities.py::"
+RULES = "tests/test_rules.py::"
+FAMILY = "tests/test_sigma_point_family.py::"
+INTERFACES = "tests/test_estimator_interfaces.py::"
 
 MUTATIONS = (
     Mutation(
@@ -145,6 +148,55 @@ MUTATIONS = (
         ".scaled(error_scale)",
         "",
         ("tests/test_sweeps.py::test_every_swept_key_reaches_what_it_names[sweep_sensor_errors]",),
+    ),
+    Mutation(
+        "fifth-degree cubature axis weight with the wrong sign",
+        "src/quadest/numerics/rules.py",
+        "np.full(2 * n, (4.0 - n) / (2.0 * (n + 2.0) ** 2)),",
+        "np.full(2 * n, (n - 4.0) / (2.0 * (n + 2.0) ** 2)),",
+        (RULES + "test_fifth_degree_cubature_integrates_quintics_exactly",),
+    ),
+    Mutation(
+        "central-difference second-order columns dropped",
+        "src/quadest/numerics/rules.py",
+        "return np.concatenate([self._first_order(D, n), self._second_order(D, n)], axis=-1)",
+        "return self._first_order(D, n)",
+        (FAMILY + "test_dd1_keeps_first_order_terms_only_and_cdkf_the_second_order_too",),
+    ),
+    Mutation(
+        "augmented filter ignores the model's noise function",
+        "src/quadest/estimators/sigma_point.py",
+        "X_pred = self.model.f_noise(X[..., :ns], X[..., ns : ns + q], u)",
+        "X_pred = self.model.f(X[..., :ns], u) + X[..., ns : ns + q]",
+        (FAMILY + "test_augmented_filter_uses_the_models_noise_functions",),
+    ),
+    Mutation(
+        "runner errors by plain subtraction instead of the model's boxminus",
+        "src/quadest/runner.py",
+        "err = model.boxminus(est.mean, data.truth[:, k])",
+        "err = est.mean - data.truth[:, k]",
+        (INTERFACES + "test_angle_filter_with_boxplus_equals_the_unwrapped_filter",),
+    ),
+    Mutation(
+        "further sensors never used",
+        "src/quadest/runner.py",
+        "            if not sensor.available[k]:",
+        "            if True:",
+        (INTERFACES + "test_several_sensors_at_their_own_rates_equal_sequential_kalman_updates",),
+    ),
+    Mutation(
+        "random estimators seeded from the truth's start stream",
+        "src/quadest/runner.py",
+        "est.set_generators([np.random.default_rng(seed) for seed in data.estimator_seeds])",
+        "est.set_generators([np.random.default_rng(np.random.SeedSequence(i)) for i in range(B)])",
+        (INTERFACES + "test_generators_come_from_the_datas_estimator_seeds",),
+    ),
+    Mutation(
+        "a collapsed particle cloud taken for divergence",
+        "src/quadest/runner.py",
+        "        if not is_cloud:\n",
+        "        if True:\n",
+        (INTERFACES + "test_singular_cloud_covariance_makes_nees_unavailable_not_a_divergence",),
     ),
 )  # fmt: skip
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from quadest.config.ranges import require_positive
 from quadest.models.base import FilterModel
+from quadest.models.validation import simulation_labels
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.data import sample_count
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
@@ -110,15 +111,7 @@ def build_upf_benchmark_data(cfg) -> MonteCarloData:
     for k in range(1, K + 1):
         x[:, k] = model.f(x[:, k - 1][:, None], inputs[:, k - 1])[:, 0] + v[:, k]
     z = np.concatenate([model.h(x[:, k][:, None], inputs[:, k]) for k in range(K + 1)], axis=1) + n
-    labels = {
-        "model": cfg.model.name,
-        "formulation": cfg.model.name,
-        "calibrated": True,
-        "sensor": "",
-        "error_scale": np.nan,
-        "scenario": "",
-        "encoder_resolution": np.nan,
-    }
+    labels = simulation_labels(cfg)
     return MonteCarloData(
         model, np.arange(K + 1) * float(cfg.sample_period), x, np.zeros((runs, K + 1, 0)), inputs, z,
         np.full((runs, 1), float(m.x0)), np.array([[float(m.P0)]]), np.zeros((runs, 0)),

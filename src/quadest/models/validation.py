@@ -89,14 +89,10 @@ def _simulate(model: FilterModel, x0: np.ndarray, inputs: np.ndarray, streams) -
     return x, z
 
 
-def _data(cfg, model, x0_true, x0_est, P0, inputs) -> MonteCarloData:
-    runs, seed = int(cfg.runs), int(cfg.seed)
-    streams = run_streams(seed, runs)
-    x, z = _simulate(model, x0_true, inputs, streams)
-    K1 = inputs.shape[1]
-    time = np.arange(K1) * float(cfg.sample_period)
-    empty = np.zeros((runs, K1, 0))
-    labels = {
+def simulation_labels(cfg) -> dict:
+    """The metrics-table labels of a model whose data is not a quadrotor flight (no sensor,
+    scenario or encoder: those columns stay empty)."""
+    return {
         "model": cfg.model.name,
         "formulation": cfg.model.name,
         "calibrated": True,
@@ -105,6 +101,16 @@ def _data(cfg, model, x0_true, x0_est, P0, inputs) -> MonteCarloData:
         "scenario": "",
         "encoder_resolution": np.nan,
     }
+
+
+def _data(cfg, model, x0_true, x0_est, P0, inputs) -> MonteCarloData:
+    runs, seed = int(cfg.runs), int(cfg.seed)
+    streams = run_streams(seed, runs)
+    x, z = _simulate(model, x0_true, inputs, streams)
+    K1 = inputs.shape[1]
+    time = np.arange(K1) * float(cfg.sample_period)
+    empty = np.zeros((runs, K1, 0))
+    labels = simulation_labels(cfg)
     estimator_seeds = run_seed_sequences(seed, runs)["estimator"]
     return MonteCarloData(model, time, x, empty, inputs, z, x0_est, P0, np.zeros((runs, 0)), estimator_seeds, labels)
 
