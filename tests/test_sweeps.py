@@ -225,6 +225,21 @@ def test_multirun_aggregate_has_the_expected_rows_and_columns(sweeps):
     assert "commit:" in report and "ok: 4" in report
 
 
+def test_sweep_aggregate_collects_each_cells_paired_comparison(sweeps):
+    """The aggregate's paired table is every cell's own paired_comparison.csv, tagged with the job
+    and its swept values (Holm's family stays the cell), plus a one-row-per-pair summary."""
+    root = sweeps["quadest_joblib"]
+    paired = pd.read_csv(root / "aggregate" / "paired.csv")
+    assert sorted(paired["job"].unique()) == [0, 1, 2, 3]
+    for job in range(4):
+        own = pd.read_csv(root / str(job) / "paired_comparison.csv")
+        got = paired[paired["job"] == job].drop(columns=["job", "sweep.alpha", "sweep.beta", "override.runs"])
+        pd.testing.assert_frame_equal(got.reset_index(drop=True), own, check_dtype=False)
+    summary = pd.read_csv(root / "aggregate" / "paired_summary.csv")
+    assert len(summary) == 4 * paired["pair"].nunique()
+    assert "paired summary" in (root / "aggregate" / "report.md").read_text()
+
+
 def test_basic_and_joblib_launchers_give_identical_metrics(sweeps):
     a = pd.read_csv(sweeps["quadest_joblib"] / "aggregate" / "cells.csv").sort_values(["job", "estimator", "state"])
     b = pd.read_csv(sweeps["basic"] / "aggregate" / "cells.csv").sort_values(["job", "estimator", "state"])

@@ -9,8 +9,8 @@ import pandas as pd
 import yaml
 
 from quadest.aggregate.figures import figures
-from quadest.aggregate.statistics import tables, with_confidence_interval
-from quadest.aggregate.sweep import load_sweep
+from quadest.aggregate.statistics import paired_summary, tables, with_confidence_interval
+from quadest.aggregate.sweep import load_paired, load_sweep
 from quadest.formatting import latex_table, markdown_table, strict_json
 
 
@@ -34,6 +34,10 @@ def aggregate(sweep_dir: Path) -> Path:
         cells.to_csv(out / "cells.csv", index=False)
         written = [_write(frame, out, name) for name, frame in tables(cells, params).items()]
         made = figures(cells, params, out / "figures")
+        paired = load_paired(sweep_dir, jobs, params)
+        if not paired.empty:
+            paired.to_csv(out / "paired.csv", index=False)
+            written.append(_write(paired_summary(paired, params), out, "paired_summary"))
     commits = sorted({c for c in jobs.get("commit", pd.Series(dtype=str)).dropna() if c})
     multirun = sweep_dir / "multirun.yaml"
     sweep_cfg = yaml.safe_load(multirun.read_text()) if multirun.is_file() else {}

@@ -7,6 +7,8 @@ import numpy as np
 import pandas as pd
 from scipy.stats import t as student_t
 
+from quadest.paired import SIGNIFICANCE
+
 
 def with_confidence_interval(cells: pd.DataFrame) -> pd.DataFrame:
     """``cells`` with ``ci95_low``/``ci95_high``: the 95 % confidence interval of the mean per-run
@@ -56,3 +58,33 @@ def tables(cells: pd.DataFrame, params: list[str]) -> dict[str, pd.DataFrame]:
     timing = per_cell.groupby("estimator", sort=False)["step_time_us"].agg(["mean", "std", "count"]).reset_index()
     timing.columns = ["estimator", "step_time_us_mean", "step_time_us_std", "jobs"]
     return {"rmse": rmse, "best_cells": best_cells(cells, params), "divergence": per_job, "timing": timing.round(2)}
+
+
+def paired_summary(paired: pd.DataFrame, params: list[str]) -> pd.DataFrame:
+    """Per cell and pair of estimators: how many filter states differ at Holm-adjusted Wilcoxon
+    p < 0.05 (Holm over the cell's pairs × states), and the state with the smallest adjusted p
+    with its relative difference and paired-bootstrap 95 % CI in percent."""
+    if paired.empty:
+        return pd.DataFrame()
+    rows = []
+    filt = paired[paired["quantity"] == "filter"]
+    for (job, pair), part in filt.groupby(["job", "pair"], sort=False):
+        tested = part.dropna(subset=["p_wilcoxon_holm"])
+        best = tested.sort_values("p_wilcoxon_holm").iloc[0] if not tested.empty else None
+        rows.append(
+            {
+                "job": job,
+                **{key: part[key].iloc[0] for key in params},
+                "pair": pair,
+                "runs": int(part["runs"].iloc[0]),
+                "states differing": f"{int((tested['p_wilcoxon_holm'] < SIGNIFICANCE).sum())} of {len(part)}",
+                "smallest p state": "" if best is None else best["state"],
+                "diff % [95% CI]": ""
+                if best is None
+                else (
+                    f"{100 * best['rel_diff']:+.3g} [{100 * best['rel_ci_low']:+.3g}, {100 * best['rel_ci_high']:+.3g}]"
+                ),
+                "p Wilcoxon (Holm)": "" if best is None else f"{best['p_wilcoxon_holm']:.2g}",
+            }
+        )
+    return pd.DataFrame(rows)

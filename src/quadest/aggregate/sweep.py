@@ -10,6 +10,8 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from quadest.paired import paired_comparison
+
 # Columns the aggregate tables use themselves; an override with one of these names (``runs=20``)
 # becomes ``override.<name>``.
 OWN_COLUMNS = {"job", "status", "error", "commit", "estimator", "quantity", "state", "unit", "rmse_mean", "rmse_std",
@@ -100,3 +102,26 @@ def load_sweep(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
         jobs.append({"job": missing, "status": "missing", "error": ""})
     cells = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
     return cells, pd.DataFrame(jobs).sort_values("job").reset_index(drop=True), params
+
+
+def load_paired(sweep_dir: Path, jobs: pd.DataFrame, params: list[str]) -> pd.DataFrame:
+    """Every finished cell's paired comparison (``<job>/paired_comparison.csv``; for a cell
+    written before that file existed, computed from its ``metrics.csv`` with the job's seed), with
+    the job number and the swept parameters as columns. Holm's family stays one cell."""
+    frames = []
+    for row in jobs[jobs["status"] == "ok"].to_dict("records"):
+        job_dir = Path(sweep_dir) / str(row["job"])
+        path = job_dir / "paired_comparison.csv"
+        if path.is_file():
+            table = pd.read_csv(path)
+        else:
+            seed = json.loads((job_dir / "summary.json").read_text())["labels"]["seed"]
+            table = paired_comparison(pd.read_csv(job_dir / "metrics.csv"), seed=int(seed))
+        if table.empty:
+            continue
+        table.insert(0, "job", int(row["job"]))
+        for i, key in enumerate(params):
+            value = row.get(key)
+            table.insert(1 + i, key, value if not isinstance(value, list) else str(value))
+        frames.append(table)
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
