@@ -320,3 +320,20 @@ def test_singular_cloud_covariance_makes_nees_unavailable_not_a_divergence():
     table = tidy_metrics([cloud], data, {"c": {"kind": "c", "proposal": [1.0, 2.0]}}, {"seed": 1})
     assert list(table.groupby("run")["ess_mean"].first()) == [0.0, 1.0, 2.0]
     assert set(table["proposal"]) == {"[1.0, 2.0]"}  # list-valued parameters tabulate as text
+
+
+def test_job_summary_reports_nis_per_sensor(tmp_path, monkeypatch):
+    """summary.json carries the mean NIS of every further sensor (here: velocity every 3rd step)."""
+    import json
+
+    import quadest.job as job
+
+    data, _ = _two_sensor_problem(runs=3)
+    data.labels = {"model": "linear"}
+    monkeypatch.setattr(job, "build_data", lambda cfg: data)
+    cfg = compose_config([*LINEAR, "runs=3", "estimator=[srukf]", "workers=1", "output.saved_runs=0"])
+    job.run_job(cfg, tmp_path)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    res = run_estimator("srukf", SRUKF(data.model), data, 1e9)
+    expected = float(np.nanmean(res.mean_sensor_nis("velocity")))
+    assert summary["estimators"]["srukf"]["nis_by_sensor"]["velocity"] == pytest.approx(expected, rel=1e-12)

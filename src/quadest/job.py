@@ -181,6 +181,10 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
             "mean_nis": _json_float(row["mean_nis"]),
             "nis_in_band": _json_float(row["nis_in_band"]),
             "step_time_us": _json_float(row["step_time_us"]),
+            "nis_by_sensor": {
+                sensor: _json_float(np.nanmean(res.mean_sensor_nis(sensor))) if (~res.diverged).any() else None
+                for sensor in res.sensor_nis
+            },
             "rmse": {
                 r["state"]: {"mean": _json_float(r["rmse_mean"]), "std": _json_float(r["rmse_std"]),
                              "pooled": _json_float(r["pooled_rmse"]), "pcrlb": _json_float(r["pcrlb"]),
