@@ -23,18 +23,27 @@ from quadest.sensors.encoders import encoder_resolution, measure_rotor_speeds
 from quadest.sensors.mimu import TriadErrors, draw_triad_errors, measure_triad
 
 
+def fly_scenario(cfg, streams: dict):
+    """``(params, scenario, truth)``: the quadrotor of ``cfg.model`` flown by the backstepping
+    controller through ``cfg.scenario`` once per run, each run starting at a horizontal position
+    drawn from its ``"start"`` stream."""
+    mcfg, T = cfg.model, float(cfg.sample_period)
+    params = quadrotor_params(mcfg)
+    flown = scenario(cfg.scenario)
+    start = np.zeros((len(streams["start"]), 3))
+    for i, rng in enumerate(streams["start"]):
+        start[i, :2] = flown.initial_position_std * rng.standard_normal(2)
+    controller = BacksteppingController(params, controller_gains(mcfg.controller))
+    truth = simulate_truth(params, controller, flown, start, float(cfg.duration), T, int(mcfg.truth_substeps))
+    return params, flown, truth
+
+
 def build_quadrotor_data(cfg) -> MonteCarloData:
     """Fly the scenario for ``cfg.runs`` runs and record what the filters see."""
     mcfg, scfg = cfg.model, cfg.sensor
     runs, T, seed = int(cfg.runs), float(cfg.sample_period), int(cfg.seed)
     streams = run_streams(seed, runs)
-    params = quadrotor_params(mcfg)
-    flown = scenario(cfg.scenario)
-    start = np.zeros((runs, 3))
-    for i, rng in enumerate(streams["start"]):
-        start[i, :2] = flown.initial_position_std * rng.standard_normal(2)
-    controller = BacksteppingController(params, controller_gains(mcfg.controller))
-    truth = simulate_truth(params, controller, flown, start, float(cfg.duration), T, int(mcfg.truth_substeps))
+    params, flown, truth = fly_scenario(cfg, streams)
 
     scale = float(scfg.error_scale)
     accel, gyro = triad_spec(scfg.accel, scale), triad_spec(scfg.gyro, scale)

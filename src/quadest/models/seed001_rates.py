@@ -22,14 +22,12 @@ import numpy as np
 from quadest.config.ranges import require_positive
 from quadest.models.base import FilterModel
 from quadest.models.config_checks import validate_quadrotor
-from quadest.models.quadrotor_config import controller_gains, quadrotor_params, scenario
+from quadest.models.quadrotor_data import fly_scenario
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
-from quadest.quadrotor.controller import BacksteppingController
 from quadest.quadrotor.dynamics import body_angular_accel, rotor_inputs
 from quadest.quadrotor.params import QuadrotorParams
-from quadest.quadrotor.simulate import simulate_truth
 
 RATES = slice(9, 12)  # body rates p, q, r in the 16-state truth
 ROTORS = slice(12, 16)
@@ -94,13 +92,7 @@ def build_seed001_rates_data(cfg) -> MonteCarloData:
     initial estimate is drawn from N(true rates, P0·I)."""
     m, runs, T, seed = cfg.model, int(cfg.runs), float(cfg.sample_period), int(cfg.seed)
     streams = run_streams(seed, runs)
-    params = quadrotor_params(m)
-    flown = scenario(cfg.scenario)
-    start = np.zeros((runs, 3))
-    for i, rng in enumerate(streams["start"]):
-        start[i, :2] = flown.initial_position_std * rng.standard_normal(2)
-    controller = BacksteppingController(params, controller_gains(m.controller))
-    truth = simulate_truth(params, controller, flown, start, float(cfg.duration), T, int(m.truth_substeps))
+    params, flown, truth = fly_scenario(cfg, streams)
     rates, rotors = truth.state[..., RATES], truth.state[..., ROTORS]
     K1 = rates.shape[1]
     noise = np.stack([rng.standard_normal((K1, 3)) for rng in streams["measurement"]]) * np.sqrt(float(m.R))
