@@ -21,6 +21,7 @@ from quadest.errors import ConfigError
 from quadest.estimators.base import Estimator, PerRunAdapter
 from quadest.estimators.central_difference import SRCDKF
 from quadest.estimators.cubature import CKF
+from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.srukf import SRUKF
 from quadest.metrics import tidy_metrics
@@ -177,7 +178,16 @@ def _sequential_kalman(data, mats):
 
 
 @pytest.mark.parametrize(
-    "make", [lambda m: SRUKF(m), lambda m: CKF(m), lambda m: SRCDKF(m)], ids=["srukf", "ckf", "srcdkf"]
+    "make",
+    [
+        lambda m: SRUKF(m),
+        lambda m: CKF(m),
+        lambda m: SRCDKF(m),
+        lambda m: BatchedFilterpyEKF(m),
+        lambda m: PerRunAdapter(m, FilterpyUKF),
+        lambda m: PerRunAdapter(m, FilterpyUKF, vectorize_points=False),
+    ],
+    ids=["srukf", "ckf", "srcdkf", "filterpy-ekf", "filterpy-ukf", "filterpy-ukf-per-point"],
 )
 def test_several_sensors_at_their_own_rates_equal_sequential_kalman_updates(make):
     data, mats = _two_sensor_problem()

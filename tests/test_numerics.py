@@ -10,16 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from quadest.errors import DowndateError, FilterDivergence
-from quadest.numerics import (
-    cholupdate,
-    kalman_gain,
-    qr_factor,
-    sigma_points,
-    unscented_transform,
-    ut_weights,
-    weighted_mean,
-    whiten,
-)
+from quadest.numerics import cholupdate, kalman_gain, qr_factor, ut_weights, whiten
+from quadest.numerics.rules import UnscentedRule, rule_mean
 
 PROPERTY = settings(max_examples=1000, deadline=None)
 cases = st.tuples(st.integers(0, 2**32 - 1), st.sampled_from([1, 4]), st.integers(1, 7))
@@ -137,7 +129,8 @@ def test_weights_and_points_match_filterpy(alpha, beta, kappa):
     rng = np.random.default_rng(4)
     S = random_factor(rng, 1, n)
     x = rng.standard_normal((1, n))
-    np.testing.assert_allclose(sigma_points(x, S, w.gamma)[0], ref.sigma_points(x[0], gram(S)[0]), rtol=1e-12)
+    points = x[:, None, :] + UnscentedRule(alpha, beta, kappa).offsets(S)
+    np.testing.assert_allclose(points[0], ref.sigma_points(x[0], gram(S)[0]), rtol=1e-12)
 
 
 def test_negative_center_weight_at_small_alpha():
@@ -153,16 +146,17 @@ def test_invalid_scaling_is_rejected(alpha, kappa):
         ut_weights(6, alpha, 2.0, kappa)
 
 
-def test_unscented_transform_is_exact_for_linear_maps():
+def test_unscented_rule_is_exact_for_linear_maps():
     rng = np.random.default_rng(5)
     n = 4
     S = random_factor(rng, 2, n)
     x = rng.standard_normal((2, n))
     M = rng.standard_normal((3, n))
     for alpha in (1e-3, 1.0):
-        w = ut_weights(n, alpha, 2.0, 0.0)
-        Y = sigma_points(x, S, w.gamma) @ M.T
-        mean, cov = unscented_transform(Y, w)
+        rule = UnscentedRule(alpha, 2.0, 0.0)
+        Y = (x[:, None, :] + rule.offsets(S)) @ M.T
+        mean = rule_mean(Y, rule.mean_weights(n))
+        cov = rule.covariance(Y - mean[:, None, :], n)
         np.testing.assert_allclose(mean, x @ M.T, rtol=1e-6 if alpha < 0.1 else 1e-12, atol=1e-8)
         np.testing.assert_allclose(cov, M @ gram(S) @ M.T, rtol=1e-6, atol=1e-8)
 
@@ -174,7 +168,7 @@ def test_weighted_mean_keeps_digits_the_direct_sum_loses():
     c = np.full(3, 12345.678)
     d = np.random.default_rng(6).standard_normal((6, 3)) * 1e-3
     Y = np.concatenate([c[None], c + d, c - d])[None]
-    assert np.abs(weighted_mean(Y, w)[0] - c).max() < 1e-11
+    assert np.abs(rule_mean(Y, w.wm)[0] - c).max() < 1e-11
     assert np.abs(np.einsum("i,bij->bj", w.wm, Y)[0] - c).max() > 1e-9
 
 

@@ -68,14 +68,20 @@ class FilterpyEKF(SingleRunEstimator):
         self.kf.predict()
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
-        if sensor is not None:
-            raise NotImplementedError("the filterpy EKF baseline updates with the primary measurement only")
+        """Update with the primary measurement or a named sensor (its ``h``, ``R`` and a
+        central-difference Jacobian)."""
         x, u = self.kf.x.T, u[None, :]
-        self.update_linearised(z, self.model.H(x, u)[0], self.model.h(x[None], u)[0, 0])
+        h = self.model.measurement(sensor).h(x[None], u)[0, 0]
+        self.update_linearised(z, self.model.measurement_jacobian(sensor, x, u)[0], h, sensor)
 
-    def update_linearised(self, z: np.ndarray, H: np.ndarray, hx: np.ndarray) -> None:
+    def update_linearised(self, z: np.ndarray, H: np.ndarray, hx: np.ndarray, sensor: str | None = None) -> None:
         """Measurement update given ``H`` (m, n) and ``h`` (m,) evaluated at the current mean."""
-        self.kf.update(np.asarray(z, dtype=float).reshape(-1, 1), HJacobian=lambda _: H, Hx=lambda _: hx.reshape(-1, 1))
+        self.kf.update(
+            np.asarray(z, dtype=float).reshape(-1, 1),
+            HJacobian=lambda _: H,
+            Hx=lambda _: hx.reshape(-1, 1),
+            R=self.model.measurement(sensor).R,
+        )
 
     @property
     def mean(self) -> np.ndarray:
@@ -120,11 +126,9 @@ class BatchedFilterpyEKF(PerRunAdapter):
         self._each(lambda i, filt: filt.predict_linearised(F[i], fx[i]))
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
-        if sensor is not None:  # each run's filter refuses further sensors and is flagged
-            super().update(z, u, sensor)
-            return
         x = self._points()
         if x is None:
             return
-        H, hx = self.model.H(x, u), self.model.h(x[:, None], u)[:, 0]
-        self._each(lambda i, filt: filt.update_linearised(z[i], H[i], hx[i]))
+        H = self.model.measurement_jacobian(sensor, x, u)
+        hx = self.model.measurement(sensor).h(x[:, None], u)[:, 0]
+        self._each(lambda i, filt: filt.update_linearised(z[i], H[i], hx[i], sensor))

@@ -50,8 +50,10 @@ class _PointBatchedUKF(UnscentedKalmanFilter):
         sigmas = self.points_fn.sigma_points(self.x, self.P)
         self.sigmas_f = self.model.f(sigmas[None], fx_args["u"][None, :])[0]
 
-    def update(self, z, R=None, UT=None, hx=None, **hx_args) -> None:
-        rows = iter(self.model.h(self.sigmas_f[None], hx_args["u"][None, :])[0])
+    def update(self, z, R=None, UT=None, hx=None, h_points=None, **hx_args) -> None:
+        """``h_points`` (default ``model.h``) is the vectorised measurement function."""
+        h = self.model.h if h_points is None else h_points
+        rows = iter(h(self.sigmas_f[None], hx_args["u"][None, :])[0])
         super().update(z, R=R, UT=UT, hx=lambda x, u: next(rows), **hx_args)
 
 
@@ -92,9 +94,18 @@ class FilterpyUKF(SingleRunEstimator):
         self.kf.predict(u=u)
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
-        if sensor is not None:
-            raise NotImplementedError("the filterpy UKF baseline updates with the primary measurement only")
-        self.kf.update(z, u=u)
+        """Update with the primary measurement or a named sensor (its ``h`` and ``R``)."""
+        if sensor is None:
+            self.kf.update(z, u=u)
+            return
+        meas = self.model.measurement(sensor)
+        # filterpy updates with the points of its last predict; a further sensor in the same step
+        # must see points of the state after the previous update (no time passes between them).
+        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+        if isinstance(self.kf, _PointBatchedUKF):
+            self.kf.update(z, R=meas.R, h_points=meas.h, u=u)
+        else:
+            self.kf.update(z, R=meas.R, hx=lambda x, u: meas.h(x[None, None, :], u[None, :])[0, 0], u=u)
 
     @property
     def mean(self) -> np.ndarray:

@@ -30,7 +30,7 @@ from quadest.errors import DowndateError
 from quadest.estimators.base import Estimator
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, cholupdate, kalman_gain, psd_sqrt, qr_factor
-from quadest.numerics.rules import IntegrationRule
+from quadest.numerics.rules import IntegrationRule, rule_mean
 
 
 def _t(a: np.ndarray) -> np.ndarray:
@@ -66,7 +66,7 @@ class SigmaPointFilter(Estimator):
         self.sqrt_R = psd_sqrt(model.R, "R")  # Sn = √Rn (5.14)
         n, q, r = model.n_err, model.process_noise_dim, model.measurement_noise_dim
         rule.validate(n + q + r if augmented else n)
-        self._sensor_cache: dict[str, tuple] = {}
+        self._sensor_cache: dict[str, np.ndarray] = {}
 
     # --- the form: how the second moment (its "spread": covariance or factor) is kept ---
 
@@ -130,8 +130,7 @@ class SigmaPointFilter(Estimator):
         """Weighted mean and deviations of points ``Y`` (B, L, ·) (eqs 5.8, 5.17, 5.22)."""
         wm = self.rule.mean_weights(dim)
         if not state:
-            Y0 = Y[..., 0, :]
-            mean = Y0 + wm[1:] @ (Y[..., 1:, :] - Y0[..., None, :])
+            mean = rule_mean(Y, wm)
             return mean, Y - mean[..., None, :]
         Y0 = Y[..., :1, :]
         mean = self.model.boxplus(Y0, (wm[1:] @ self.model.boxminus(Y[..., 1:, :], Y0))[..., None, :])[..., 0, :]
@@ -158,10 +157,9 @@ class SigmaPointFilter(Estimator):
         if sensor is None:
             return self.model.h, self.sqrt_R, self.model.h_noise
         if sensor not in self._sensor_cache:
-            model = self.model.sensors[sensor]
-            self._sensor_cache[sensor] = (model.h, psd_sqrt(model.R, f"R of sensor '{sensor}'"))
-        h, sqrt_R = self._sensor_cache[sensor]
-        return h, sqrt_R, lambda x, v, u: h(x, u) + v
+            self._sensor_cache[sensor] = psd_sqrt(self.model.measurement(sensor).R, f"R of sensor '{sensor}'")
+        h = self.model.measurement(sensor).h
+        return h, self._sensor_cache[sensor], lambda x, v, u: h(x, u) + v
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
         """Measurement update (eqs 5.20–5.29), with the primary measurement or a named sensor."""

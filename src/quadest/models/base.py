@@ -112,6 +112,18 @@ class FilterModel(ABC):
         J = self.H_analytic(x, u)
         return J if J is not None else self.jacobian_fd(self.h, x, u)
 
+    def measurement(self, sensor: str | None = None) -> MeasurementModel:
+        """The primary measurement (``sensor=None``: ``h``, ``R``) or ``sensors[sensor]``, as one
+        :class:`MeasurementModel`, so a filter updates with either the same way."""
+        if sensor is None:
+            return MeasurementModel(self.h, self.R, tuple(self.measurement_names))
+        return self.sensors[sensor]
+
+    def measurement_jacobian(self, sensor: str | None, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Jacobian (B, m, n) of the primary measurement (:meth:`H`) or of a further sensor
+        (central differences) at ``x`` (B, n)."""
+        return self.H(x, u) if sensor is None else self.jacobian_fd(self.sensors[sensor].h, x, u)
+
     def F_points(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Jacobians of ``f`` at ``K`` points per run, ``x`` (B, K, n) → (B, K, n, n) (for example
         one per particle). Central differences in one model call unless a model overrides it."""
