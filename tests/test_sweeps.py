@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -21,6 +22,7 @@ from omegaconf import OmegaConf
 
 from quadest.aggregate.cli import main as aggregate_main
 from quadest.aggregate.report import aggregate
+from quadest.aggregate.sweep import expected_jobs
 from quadest.config.schema import register_schemas
 from quadest.config.validate import validate
 from quadest.estimators.registry import resolve
@@ -266,3 +268,22 @@ def test_aggregation_reports_failed_unfinished_and_missing_jobs(sweeps, tmp_path
 def test_aggregate_command_rejects_a_missing_folder(tmp_path, capsys):
     assert aggregate_main([str(tmp_path / "nope")]) == 2
     assert "is not a directory" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("params", "task", "expected"),
+    [
+        ({"a": "1,2,3", "b": "4,5"}, [], 6),
+        ({"a": "1,2,3"}, ["b=7,8"], 6),
+        ({"a": "1,2,3"}, ["a=9"], 1),
+        ({"a": "1,2,3", "b": "4,5"}, ["a=9,10"], 4),
+        ({"a": "1,2,3"}, ["c=[1,2]"], 3),
+    ],
+)
+def test_expected_jobs_lets_the_command_line_replace_a_swept_key(tmp_path, params, task, expected):
+    """Hydra's basic sweeper appends the command-line overrides to the sweeper params and the last
+    one of a key wins, so ``a=9`` on the command line shrinks a 3-value axis to one job."""
+    (tmp_path / "multirun.yaml").write_text(
+        yaml.safe_dump({"hydra": {"sweeper": {"params": params}, "overrides": {"task": task}}})
+    )
+    assert expected_jobs(tmp_path) == expected

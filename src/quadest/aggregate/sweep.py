@@ -31,20 +31,27 @@ def _value(text: str):
         return text
 
 
+def _sweep_size(value) -> int:
+    """Values of one override: a comma list is a sweep, a bracketed list or anything else is one."""
+    text = str(value)
+    return len(text.split(",")) if "," in text and not text.startswith("[") else 1
+
+
 def expected_jobs(sweep_dir: Path) -> int | None:
-    """Number of jobs the sweep's grid holds (product of the comma lists in the sweeper params)."""
+    """Number of jobs the sweep's grid holds: the product of the sweep sizes of the sweeper params
+    and the command-line overrides, where a command-line override of a key the params also list
+    replaces it (as Hydra's basic sweeper does: the command line comes last and wins)."""
     path = sweep_dir / "multirun.yaml"
     if not path.is_file():
         return None
     cfg = yaml.safe_load(path.read_text()) or {}
     params = ((cfg.get("hydra") or {}).get("sweeper") or {}).get("params") or {}
     overrides = ((cfg.get("hydra") or {}).get("overrides") or {}).get("task") or []
-    sizes = [len(str(v).split(",")) for v in params.values()]
+    sizes = {str(key): _sweep_size(value) for key, value in params.items()}
     for item in overrides:
         key, _, value = str(item).partition("=")
-        if "," in value and not value.startswith("[") and key not in params:
-            sizes.append(len(value.split(",")))
-    return int(np.prod(sizes)) if sizes else 1
+        sizes[key] = _sweep_size(value)
+    return int(np.prod(list(sizes.values()))) if sizes else 1
 
 
 def load_sweep(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
