@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import time
 
 import numpy as np
@@ -98,6 +99,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=50, help="steps timed for the batched filter")
     parser.add_argument("--loop-steps", type=int, default=10, help="steps timed for the filterpy loop")
     args = parser.parse_args()
+    load_before = os.getloadavg()[0]
     data = ungm_data(100)
     batched = time_batched(data, args.steps)
     loop = time_filterpy_loop(data, args.loop_steps)
@@ -106,6 +108,8 @@ def main() -> None:
     print(f"per-run loop with filterpy.stratified_resample: {loop:.1f} ns per particle per step")
     print(f"speed-up: {loop / batched:.1f}x")
     print(f"runner, ungm_toolbox with pf (100 runs x {PARTICLES} particles x 500 steps): {full:.1f} s")
+    load = (load_before, os.getloadavg()[0])
+    print(f"1-minute load average before / after: {load[0]:.1f} / {load[1]:.1f} on {os.cpu_count()} cores")
     if importlib.util.find_spec("particles") is None:
         print("particles library: not installed here (particles 0.4 pins numpy < 2, not a quadest dependency); skipped")
     else:
@@ -116,6 +120,7 @@ def main() -> None:
             "filterpy_loop_ns_per_particle_step": round(loop, 2),
             "speedup": round(loop / batched, 1),
             "ungm_toolbox_pf_s": round(full, 1),
+            "load_average": [round(v, 2) for v in load],
         }
         print(json.dumps(summary))
 

@@ -9,7 +9,7 @@ from filterpy.kalman import KalmanFilter
 from scipy.stats import multivariate_normal
 
 from quadest.errors import ConfigError
-from quadest.estimators.particle import BootstrapPF
+from quadest.estimators.particle import BootstrapPF, weighted_moments
 from quadest.estimators.particle_ekpf import EKPF
 from quadest.estimators.particle_ilopf import ILOPF
 from quadest.estimators.particle_upf import UPF
@@ -216,6 +216,19 @@ def test_initialize_without_generators_says_what_is_missing():
     model, x0, P0, _, _ = linear_gaussian_problem(runs=2, steps=1)
     with pytest.raises(RuntimeError, match="set_generators"):
         BootstrapPF(model).initialize(x0, P0)
+
+
+def test_weighted_moments_by_hand_leaving_out_zero_weight_particles_even_non_finite_ones():
+    """Mean and covariance computed by hand: run 0 has a NaN particle of weight 0, which must not
+    poison its run; a batch of positive weights only takes the path without masking."""
+    x = np.array([[[1.0], [3.0], [np.nan]], [[0.0], [2.0], [4.0]]])
+    w = np.array([[0.5, 0.5, 0.0], [0.25, 0.5, 0.25]])
+    mean, cov = weighted_moments(x, w)
+    np.testing.assert_array_equal(mean, [[2.0], [2.0]])  # (1 + 3)/2; 0.5·2 + 0.25·4
+    np.testing.assert_array_equal(cov, [[[1.0]], [[2.0]]])  # 0.5·1 + 0.5·1; 0.25·4 + 0.25·4
+    mean, cov = weighted_moments(x[1:], w[1:])
+    np.testing.assert_array_equal(mean, [[2.0]])
+    np.testing.assert_array_equal(cov, [[[2.0]]])
 
 
 def test_resampling_carries_each_particles_covariance_with_it():

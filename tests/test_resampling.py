@@ -8,6 +8,7 @@ from filterpy.monte_carlo import resampling as fp
 
 from quadest.errors import ConfigError
 from quadest.numerics.resampling import (
+    BLOCK_PARTICLES,
     RESAMPLING_SCHEMES,
     draw_uniforms,
     effective_sample_size,
@@ -55,6 +56,45 @@ def test_same_indices_as_filterpy_on_the_same_uniforms(scheme, monkeypatch):
     ours = resample_from_uniforms(scheme, w, u)
     for b in range(B):
         np.testing.assert_array_equal(ours[b], _filterpy_indices(scheme, w[b], u[b], monkeypatch))
+
+
+@pytest.mark.parametrize("scheme", ["stratified", "systematic"])
+@pytest.mark.parametrize("u", [0.0, 0.5])
+def test_positions_on_the_cumulative_weights_select_as_filterpy(scheme, u, monkeypatch):
+    """Dyadic weights have exact cumulative sums k/8, and uniforms 0 or 1/2 put positions exactly on
+    them: ties, where only the rule ``c_j ≤ u`` (filterpy's ``u < c_j`` moves on) decides."""
+    w = np.array([[2.0, 0.0, 1.0, 0.0, 3.0, 1.0, 0.0, 1.0], [0.0, 0.0, 0.0, 4.0, 4.0, 0.0, 0.0, 0.0]]) / 8.0
+    uniforms = np.full((2, 8), u)
+    ours = resample_from_uniforms(scheme, w, uniforms)
+    for b in range(2):
+        np.testing.assert_array_equal(ours[b], _filterpy_indices(scheme, w[b], uniforms[b], monkeypatch))
+
+
+@pytest.mark.parametrize("scheme", ["stratified", "systematic"])
+def test_strata_selection_follows_the_rule_across_blocks_and_at_the_edges(scheme):
+    """The linear-time selection against the rule itself, ``min(#{j : c_j ≤ u_i}, N − 1)`` by brute
+    force, over more runs than one block holds, with zero weights, positions placed on cumulative
+    weights (ties) and a uniform so close to 1 that ``i + u`` rounds to ``i + 1`` (the last position
+    to exactly 1)."""
+    rng = np.random.default_rng(5)
+    N = 1000
+    B = 2 * BLOCK_PARTICLES // N + 3
+    w = _weights(rng, B, N)
+    w[1, :990] = 0.0  # all weight on a few particles
+    w[3] = 1.0  # c_j = fl((j + 1)/N) = u_j of a uniform that rounds up: a tie one stratum below ⌊N c_j⌋
+    w /= w.sum(axis=1, keepdims=True)
+    c = np.cumsum(w, axis=1)
+    c /= c[:, -1:]
+    u = rng.random((B, N))
+    i = np.floor(c[2] * N).astype(int).clip(0, N - 1)
+    u[2, i] = c[2] * N - i  # position i on c_j
+    u[3] = 1.0 - 2.0**-53  # (N − 1 + u) / N rounds to 1
+    positions = (np.arange(N) + (u if scheme == "stratified" else u[:, :1])) / N
+    rule = np.minimum((c[:, None, :] <= positions[:, :, None]).sum(axis=-1), N - 1)
+    np.testing.assert_array_equal(resample_from_uniforms(scheme, w, u), rule)
+    assert positions[3, -1] == 1.0 and (positions[3, :-1] == c[3, :-1]).sum() > 100
+    if scheme == "stratified":  # (systematic reads u[:, 0] only)
+        assert (positions[2, i] == c[2]).sum() > 100
 
 
 @pytest.mark.parametrize("scheme", RESAMPLING_SCHEMES)

@@ -5,7 +5,7 @@ log-weights (B, N), plus any per-particle arrays a proposal needs (the EKF propo
 (B, N, n, n)) in :attr:`ParticleFilter.particle_state`, which resampling carries along. Every
 operation works on all particles of all runs at once; the only Python loops run over the runs,
 to draw from each run's own generator (capability ``"random"``), so a run in a batch gets exactly
-the numbers it gets alone.
+the numbers it gets alone (and over blocks of runs in :func:`~quadest.numerics.resampling.resample_from_uniforms`).
 
 One step (sequential importance sampling with resampling; Gordon, Salmond & Smith 1993; Doucet,
 Godsill & Andrieu 2000, "On sequential Monte Carlo sampling methods for Bayesian filtering"):
@@ -81,17 +81,19 @@ def check_ranges(params_cls: type, values: dict, n: int) -> None:
 
 
 def gather_particles(arrays: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """``arrays`` (B, N, ...) picked along the particle axis by ``indices`` (B, N)."""
-    shape = indices.shape + (1,) * (arrays.ndim - 2)
-    return np.take_along_axis(arrays, indices.reshape(shape), axis=1)
+    """``arrays`` (B, N, ...) picked along the particle axis by ``indices`` (B, N')."""
+    B, N = arrays.shape[:2]
+    flat = (indices + N * np.arange(B)[:, None]).ravel()
+    return arrays.reshape(B * N, *arrays.shape[2:])[flat].reshape(*indices.shape, *arrays.shape[2:])
 
 
 def weighted_moments(x: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean (B, n) and covariance (B, n, n) of clouds ``x`` (B, N, n) with weights ``w`` (B, N)
     (particles of zero weight, possibly non-finite, are left out)."""
-    x = np.where(w[..., None] > 0, x, 0.0)
+    if not np.all(w > 0):  # 0 · NaN would be NaN; a zeroed particle adds exactly 0 to both sums
+        x = np.where(w[..., None] > 0, x, 0.0)
     mean = np.einsum("bk,bki->bi", w, x)
-    d = np.where(w[..., None] > 0, x - mean[:, None, :], 0.0)
+    d = x - mean[:, None, :]
     cov = np.einsum("bk,bki,bkj->bij", w, d, d)
     return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
@@ -137,6 +139,7 @@ class ParticleFilter(Estimator):
                 "model", model.name, "a model with vector states and one measurement (particle filters take no sensors)"
             )
         self.N = int(particles)
+        self._log_uniform = np.log(np.full(1, 1.0 / self.N))[0]  # log(1/N) as np.log(w) gives it
         self.resampling, self.schedule, self.ess_threshold = resampling, schedule, float(ess_threshold)
         self.estimate, self.roughening, self.initial_cloud = estimate, float(roughening), initial_cloud
         self.particle_state: dict[str, np.ndarray] = {}
@@ -154,7 +157,12 @@ class ParticleFilter(Estimator):
 
     def _per_run(self, draw) -> np.ndarray:
         """Stack ``draw(rng)`` over the runs' generators."""
-        return np.stack([draw(rng) for rng in self.rngs])
+        first = np.asarray(draw(self.rngs[0]))
+        out = np.empty((len(self.rngs), *first.shape), dtype=first.dtype)
+        out[0] = first
+        for rng, row in zip(self.rngs[1:], out[1:], strict=True):
+            row[...] = draw(rng)
+        return out
 
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
         B, n = x0.shape
@@ -221,8 +229,11 @@ class ParticleFilter(Estimator):
             self.resample_runs(w, runs)
             w[runs] = 1.0 / self.N
             self.resample_count[runs] += 1
-        with np.errstate(divide="ignore"):
-            self.logw = np.log(w)
+        if runs.size == w.shape[0]:
+            self.logw = np.full_like(w, self._log_uniform)
+        else:
+            with np.errstate(divide="ignore"):
+                self.logw = np.log(w)
         if self.estimate == "resampled":
             self._mean, self._cov = weighted_moments(self.x, w)
         self._park_failed()
@@ -239,13 +250,21 @@ class ParticleFilter(Estimator):
         """The resampling proper: new clouds for ``runs`` from their weights ``w`` (R, N), carrying
         :attr:`particle_state` (a filter with another resampling overrides this)."""
         idx = resample(self.resampling, w, rngs)
-        self.x[runs] = gather_particles(self.x[runs], idx)
+        self.x = self._pick(self.x, runs, idx)
         self.carry(runs, idx)
+
+    def _pick(self, arrays: np.ndarray, runs: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """``arrays`` (B, N, ...) with the particles of ``runs`` picked by ancestor indices ``idx``
+        (R, N) (a new array when every run resamples, else updated in place)."""
+        if runs.size == arrays.shape[0]:
+            return gather_particles(arrays, idx)
+        arrays[runs] = gather_particles(arrays[runs], idx)
+        return arrays
 
     def carry(self, runs: np.ndarray, idx: np.ndarray) -> None:
         """Pick the per-particle arrays of ``runs`` by ancestor indices ``idx`` (R, N)."""
-        for arr in self.particle_state.values():
-            arr[runs] = gather_particles(arr[runs], idx)
+        for key, arr in self.particle_state.items():
+            self.particle_state[key] = self._pick(arr, runs, idx)
 
     def _roughen(self, runs: np.ndarray, rngs: list[np.random.Generator]) -> None:
         x = self.x[runs]

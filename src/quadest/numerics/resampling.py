@@ -20,7 +20,8 @@ uniforms (B, N) explicitly (``systematic`` reads column 0 only; ``residual`` rea
 the cumulative weights (divided by their total, so the last is exactly 1), the rule of ``filterpy.monte_carlo``, so
 both give the same indices on the same uniforms (filterpy's ``residual_resample`` computes its
 residual weights as ``w − ⌊N w⌋`` instead of ``N w − ⌊N w⌋``, filterpy issue #290; its
-deterministic part is right).
+deterministic part is right). ``stratified`` and ``systematic`` evaluate the rule exactly in
+linear time (:func:`_select_in_strata`), the others by binary search.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numpy as np
 from quadest.errors import ConfigError
 
 RESAMPLING_SCHEMES = ("multinomial", "systematic", "stratified", "residual")
+BLOCK_PARTICLES = 1 << 15  # particles resampled at once (256 KiB per float64 temporary)
 
 
 def check_scheme(scheme: str, key: str = "resampling") -> None:
@@ -51,25 +53,50 @@ def normalise_log_weights(log_weights: np.ndarray) -> tuple[np.ndarray, np.ndarr
     uniform weights so the arithmetic of the batch stays finite."""
     finite = np.isfinite(log_weights)
     vanished = ~finite.any(axis=-1)
-    shifted = np.where(finite, log_weights, -np.inf)
-    top = np.max(np.where(finite, shifted, -np.inf), axis=-1, keepdims=True)
+    w = np.where(finite, log_weights, -np.inf)
+    top = np.max(w, axis=-1, keepdims=True)
     top[vanished] = 0.0
-    w = np.exp(shifted - top)
+    w -= top
+    np.exp(w, out=w)
     w[vanished] = 1.0
-    return w / w.sum(axis=-1, keepdims=True), vanished
+    w /= w.sum(axis=-1, keepdims=True)
+    return w, vanished
 
 
 def _cumulative(weights: np.ndarray) -> np.ndarray:
     c = np.cumsum(weights, axis=-1)
-    return c / c[:, -1:]  # the last entry is exactly 1 (x / x), so no uniform in [0, 1) falls beyond it
+    c /= c[:, -1:]  # the last entry is exactly 1 (x / x), so no uniform in [0, 1) falls beyond it
+    return c
 
 
 def _select(cumulative: np.ndarray, positions: np.ndarray) -> np.ndarray:
-    """``#{j : c_j ≤ u}`` for every position ``u`` of every run: one exact binary search per run
-    (a loop over runs, not particles; faster than any batched merge we tried)."""
+    """``#{j : c_j ≤ u}`` for every position ``u`` of every run, in any order (multinomial, the
+    random part of residual): one exact binary search per run (a loop over runs, not particles)."""
     N = cumulative.shape[1]
     out = np.stack([np.searchsorted(c, u, side="right") for c, u in zip(cumulative, positions, strict=True)])
     return np.minimum(out, N - 1).reshape(positions.shape)
+
+
+def _select_in_strata(cumulative: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """:func:`_select` for positions ``u_i = fl(fl(i + U_i) / N)`` with ``U_i`` in [0, 1)
+    (stratified, systematic), exactly and in linear time for all runs at once.
+
+    Such a position lies in its stratum, ``fl(i/N) ≤ u_i ≤ fl((i+1)/N)``, so the positions are sorted
+    and, for each cumulative weight ``c_j`` with ``m = ⌊fl(N c_j)⌋``, every ``i ≤ m − 2`` has
+    ``u_i < c_j`` (for N < 2⁵²) and no ``i ≥ m + 1`` has (``c_j < (m+1)/N`` exactly, so
+    ``u_i ≥ fl((m+1)/N) ≥ c_j``): ``K_j = #{i : u_i < c_j}`` needs only the comparisons at
+    ``i = m − 1`` and ``i = m``. Then ``#{j : c_j ≤ u_i} = #{j : K_j ≤ i}``, a cumulative count of
+    the ``K_j`` (one ``bincount`` over the batch, each run offset by ``N + 1``)."""
+    B, N = cumulative.shape
+    run = np.arange(B)[:, None]
+    m = np.floor(cumulative * N).astype(np.intp)  # in [0, N]: 0 ≤ c_j ≤ 1
+    flat_u = positions.ravel()
+    below = np.maximum(m - 1, 0)
+    below += (m >= 1) & (flat_u[np.maximum(m - 1, 0) + N * run] < cumulative)
+    below += (m < N) & (flat_u[np.minimum(m, N - 1) + N * run] < cumulative)
+    below += (N + 1) * run
+    counts = np.bincount(below.ravel(), minlength=B * (N + 1)).reshape(B, N + 1)[:, :N]
+    return np.minimum(np.cumsum(counts, axis=1), N - 1)
 
 
 def _residual(weights: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
@@ -91,22 +118,38 @@ def _residual(weights: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
     return np.where(np.arange(N)[None, :] < kept[:, None], np.minimum(fixed, N - 1), drawn)
 
 
-def resample_from_uniforms(scheme: str, weights: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
-    """Ancestor indices (B, N) of normalised ``weights`` (B, N) from explicit ``uniforms`` (B, N)
-    in [0, 1) (see the module docstring for which columns each scheme reads)."""
-    check_scheme(scheme)
-    weights = np.asarray(weights, dtype=float)
-    uniforms = np.asarray(uniforms, dtype=float)
+def _resample_block(scheme: str, weights: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
     N = weights.shape[1]
     if scheme == "residual":
         return _residual(weights, uniforms)
     if scheme == "multinomial":
-        positions = uniforms
-    elif scheme == "stratified":
+        return _select(_cumulative(weights), uniforms)
+    if scheme == "stratified":
         positions = (np.arange(N)[None, :] + uniforms) / N
     else:
         positions = (np.arange(N)[None, :] + uniforms[:, :1]) / N
-    return _select(_cumulative(weights), positions)
+    return _select_in_strata(_cumulative(weights), positions)
+
+
+def resample_from_uniforms(scheme: str, weights: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
+    """Ancestor indices (B, N) of normalised ``weights`` (B, N) from explicit ``uniforms`` (B, N)
+    in [0, 1) (see the module docstring for which columns each scheme reads).
+
+    Runs are resampled independently, in blocks of about :data:`BLOCK_PARTICLES` particles: the
+    temporaries of a block stay in the processor's cache, which on the development machine more than
+    halves the time of 100 runs × 1000 particles against one pass over the whole batch."""
+    check_scheme(scheme)
+    weights = np.asarray(weights, dtype=float)
+    uniforms = np.asarray(uniforms, dtype=float)
+    B, N = weights.shape
+    runs = max(1, BLOCK_PARTICLES // N)
+    if B <= runs:
+        return _resample_block(scheme, weights, uniforms)
+    out = np.empty((B, N), dtype=np.intp)
+    for start in range(0, B, runs):
+        block = slice(start, start + runs)
+        out[block] = _resample_block(scheme, weights[block], uniforms[block])
+    return out
 
 
 def draw_uniforms(scheme: str, rngs: Sequence[np.random.Generator], N: int) -> np.ndarray:
@@ -117,7 +160,10 @@ def draw_uniforms(scheme: str, rngs: Sequence[np.random.Generator], N: int) -> n
         out = np.zeros((len(rngs), N))
         out[:, 0] = [rng.random() for rng in rngs]
         return out
-    return np.stack([rng.random(N) for rng in rngs]) if len(rngs) else np.zeros((0, N))
+    out = np.empty((len(rngs), N))
+    for rng, row in zip(rngs, out, strict=True):
+        rng.random(out=row)
+    return out
 
 
 def resample(scheme: str, weights: np.ndarray, rngs: Sequence[np.random.Generator]) -> np.ndarray:
