@@ -55,25 +55,34 @@ def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
         x = x[..., None]
     if x.shape[:-1] != S.shape[:-1]:
         raise ValueError(f"cholupdate: u of shape {np.shape(u)} does not fit S of shape {S.shape}")
-    # Work batch-last, (n, n, B) and (n, k, B), so that every slice below is contiguous.
+    # Work batch-last, (n, n, B) and (n, k, B), so that every slice below is contiguous. The
+    # sub-column arithmetic writes in place (``out=``): the same operations in the same order as
+    # ``col = (L + σ s v) / c; v = c v − s col``, without temporaries (bit-identical results).
     L = np.array(np.moveaxis(S, (-2, -1), (0, 1)), order="C", copy=True)
     x = np.moveaxis(x, (-2, -1), (0, 1)) * np.sqrt(abs(nu))
-    sigma = 1.0 if nu >= 0 else -1.0
+    downdate = nu < 0
     n = L.shape[0]
+    scratch = np.empty_like(L[0])
     with np.errstate(invalid="ignore", divide="ignore"):
         for j in range(x.shape[1]):
             v = np.array(x[:, j])
             for k in range(n):
                 Lkk = L[k, k]
                 vk = v[k]
-                r = np.sqrt(Lkk * Lkk + sigma * vk * vk)  # NaN where a downdate fails
+                r2 = Lkk * Lkk
+                v2 = vk * vk
+                r = np.sqrt(r2 - v2 if downdate else r2 + v2)  # NaN where a downdate fails
                 c = r / Lkk
                 s = vk / Lkk
                 L[k, k] = r
                 if k + 1 < n:
-                    col = (L[k + 1 :, k] + (sigma * s) * v[k + 1 :]) / c
-                    L[k + 1 :, k] = col
-                    v[k + 1 :] = c * v[k + 1 :] - s * col
+                    col, rest, tmp = L[k + 1 :, k], v[k + 1 :], scratch[: n - k - 1]
+                    np.multiply(-s if downdate else s, rest, out=tmp)
+                    np.add(col, tmp, out=col)
+                    np.divide(col, c, out=col)
+                    np.multiply(rest, c, out=rest)
+                    np.multiply(s, col, out=tmp)
+                    np.subtract(rest, tmp, out=rest)
     L = np.moveaxis(L, (0, 1), (-2, -1))
     # A failed pivot (r² ≤ 0) leaves NaN, inf or a zero diagonal in that run's rows only.
     failed = ~(np.diagonal(L, axis1=-2, axis2=-1) > 0.0).all(-1) | ~np.isfinite(L).all((-2, -1))
