@@ -2,8 +2,9 @@
 
 For every estimator the runner keeps the companion values (thesis: integrated angles and
 positions), calls ``predict`` with the previous input and ``update`` with the current
-measurement, and accumulates per run: squared errors per state, NEES, NIS and the wall time of
-the filter calls.
+measurement, and accumulates per run: squared errors per state and of the model's derived errors
+(:meth:`~quadest.models.base.FilterModel.derived_errors`), NEES, NIS and the wall time of the
+filter calls.
 
 Order within a step: ``predict(u_{k−1})``, then ``update`` with the model's primary measurement
 (every step), then once per further sensor whose sample is available at step ``k``, in the order
@@ -34,6 +35,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from quadest.estimators.base import Estimator
+from quadest.models.base import FilterModel
 from quadest.montecarlo import MonteCarloData
 from quadest.numerics import batched_cholesky, whiten
 
@@ -46,6 +48,8 @@ class EstimatorResult:
         name: the estimator's label (its key under ``estimator.``).
         sq_error_sum: (B, n) sum over steps 1..K of squared state errors.
         companion_sq_error_sum: (B, nc) the same for the companion values.
+        derived_sq_error_sum: (B, d) the same for the model's derived errors
+            (:meth:`~quadest.models.base.FilterModel.derived_errors`, e.g. roll, pitch, yaw).
         steps: (B,) number of steps that counted (K unless the run diverged).
         nees_sum, nis_sum: (B,) sums over counted steps (NIS: the primary measurement).
         nees_steps: (B,) steps whose NEES was available (fewer than ``steps`` only for "cloud"
@@ -59,6 +63,9 @@ class EstimatorResult:
         reasons: run → reason text.
         step_time_us: wall time of predict + update per step per run (batch time / B).
         saved: time series of the first runs: ``estimate``, ``std``, ``companion``.
+        truth, companion_truth: the truth this estimator was scored against, first runs only
+            (closed loop with the estimate fed back: each estimator flies its own truth; ``None``
+            when the truth is the data's, shared by every estimator).
     """
 
     name: str
@@ -79,6 +86,9 @@ class EstimatorResult:
     sensor_nis: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     nees_steps: np.ndarray | None = None
     diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
+    truth: np.ndarray | None = None
+    companion_truth: np.ndarray | None = None
+    derived_sq_error_sum: np.ndarray | None = None
 
     def _per_run(self, totals: np.ndarray, root: bool = False) -> np.ndarray:
         """Time averages of per-run sums (square-rooted for RMSE); NaN for diverged runs."""
@@ -93,6 +103,11 @@ class EstimatorResult:
     def rmse(self) -> np.ndarray:
         """(B, n) per-run RMSE over time; NaN for diverged runs."""
         return self._per_run(self.sq_error_sum, root=True)
+
+    @property
+    def derived_rmse(self) -> np.ndarray:
+        """(B, d) per-run RMSE of the derived errors; NaN for diverged runs."""
+        return self._per_run(self.derived_sq_error_sum, root=True)
 
     @property
     def companion_rmse(self) -> np.ndarray:
@@ -135,6 +150,169 @@ def _covariance_factor(est: Estimator) -> np.ndarray:
     return batched_cholesky(est.covariance)[0]
 
 
+@dataclass(frozen=True)
+class FilterStart:
+    """Where every run of an estimator starts: ``x0`` (B, n), ``P0`` (n, n), the companion values
+    ``companion0`` (B, nc) and the runs' ``"estimator"`` seeds (see :class:`MonteCarloData`)."""
+
+    x0: np.ndarray
+    P0: np.ndarray
+    companion0: np.ndarray
+    estimator_seeds: list[np.random.SeedSequence]
+
+    @classmethod
+    def of(cls, data: MonteCarloData) -> FilterStart:
+        return cls(data.x0, data.P0, data.companion0, data.estimator_seeds)
+
+
+class EstimatorTracker:
+    """Steps one estimator through a batch and accumulates its metrics, one sample at a time.
+
+    :func:`run_estimator` drives it over recorded data; the closed loop
+    (:mod:`quadest.closed_loop.feedback`) drives it with each sample as its plant produces it.
+    ``truth`` and ``companion_truth`` passed to :meth:`step` are this estimator's own.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        est: Estimator,
+        model: FilterModel,
+        start: FilterStart,
+        steps: int,
+        divergence_bound: float,
+        saved_runs: int = 0,
+        sensor_names: tuple[str, ...] = (),
+    ) -> None:
+        B, K1 = start.x0.shape[0], steps + 1
+        n, nc = model.n_err, start.companion0.shape[-1]
+        self.name, self.est, self.model, self.bound = name, est, model, divergence_bound
+        self.K = steps
+        self.saved_runs = saved_runs = min(saved_runs, B)
+        self.sq, self.csq, self.steps = np.zeros((B, n)), np.zeros((B, nc)), np.zeros(B)
+        self.dsq = np.zeros((B, len(model.derived_error_names)))
+        self.nees_sum, self.nis_sum, self.nees_steps = np.zeros(B), np.zeros(B), np.zeros(B)
+        self.nees_t, self.nis_t, self.alive_t = np.full(K1, np.nan), np.full(K1, np.nan), np.zeros(K1)
+        self.sq_t = np.zeros((K1, n))
+        self.diverged = np.zeros(B, dtype=bool)
+        self.diverged_step = np.full(B, -1)
+        self.reasons: dict[int, str] = {}
+        self.est_hist = np.full((saved_runs, K1, start.x0.shape[-1]), np.nan)
+        self.std_hist = np.full((saved_runs, K1, n), np.nan)
+        self.comp_hist = np.full((saved_runs, K1, nc), np.nan)
+        self.has_innovation = "innovation" in est.capabilities
+        self.is_cloud = not {"cloud", "no_covariance"}.isdisjoint(est.capabilities)  # NEES may be unavailable
+        self.sensor_nis = {s: (np.zeros(B), np.zeros(B)) for s in sensor_names}
+        self.elapsed = 0.0
+        if "random" in est.capabilities:
+            est.set_generators([np.random.default_rng(seed) for seed in start.estimator_seeds])
+        t0 = time.perf_counter()
+        est.initialize(start.x0.copy(), np.broadcast_to(start.P0, (B, n, n)).copy())
+        self.elapsed += time.perf_counter() - t0
+        self.companion = start.companion0.copy()
+        self._record(0)
+
+    def flag(self, mask: np.ndarray, k: int, why) -> None:
+        """Mark the runs of ``mask`` diverged at step ``k`` (a reason text, or run → text)."""
+        for i in np.flatnonzero(mask & ~self.diverged):
+            self.diverged[i], self.diverged_step[i] = True, k
+            self.reasons[int(i)] = why(int(i)) if callable(why) else why
+
+    def _record(self, k: int) -> None:
+        """Keep the first ``saved_runs`` series; a diverged run shows NaN, not its placeholder."""
+        s = self.saved_runs
+        if not s:
+            return
+        keep = ~self.diverged[:s, None]
+        self.est_hist[:, k] = np.where(keep, self.est.mean[:s], np.nan)
+        var = np.diagonal(self.est.covariance[:s], axis1=-2, axis2=-1)
+        self.std_hist[:, k] = np.where(keep, np.sqrt(np.clip(var, 0, None)), np.nan)
+        self.comp_hist[:, k] = np.where(keep, self.companion[:s], np.nan)
+
+    def _update_sensors(self, further: list[tuple[str, np.ndarray]], u_now: np.ndarray) -> float:
+        """Further sensors available at this step, in order, with their NIS; returns the filter time."""
+        spent = 0.0
+        for sensor_name, z in further:
+            t0 = time.perf_counter()
+            self.est.update(z, u_now, sensor=sensor_name)
+            spent += time.perf_counter() - t0
+            if self.has_innovation:
+                total, count = self.sensor_nis[sensor_name]
+                nis_s = _mahalanobis_sq(*self.est.innovation())
+                live = ~self.diverged & np.isfinite(nis_s)
+                total[live] += nis_s[live]
+                count[live] += 1
+        return spent
+
+    def step(
+        self,
+        k: int,
+        u_prev: np.ndarray,
+        u_now: np.ndarray,
+        z: np.ndarray,
+        truth: np.ndarray,
+        companion_truth: np.ndarray,
+        further: list[tuple[str, np.ndarray]] = (),
+    ) -> None:
+        """Step ``k``: ``predict`` with the measured input of sample k−1, ``update`` with sample k's
+        primary measurement ``z`` and then the ``further`` (name, values) samples; score against
+        ``truth`` (B, n) and ``companion_truth`` (B, nc) of sample k."""
+        est, model, B = self.est, self.model, self.diverged.shape[0]
+        next_companion = model.companion_step(self.companion, est.mean)
+        u_prev = model.filter_input(u_prev, self.companion)
+        self.companion = next_companion
+        u_now = model.filter_input(u_now, self.companion)
+        t0 = time.perf_counter()
+        est.predict(u_prev)
+        est.update(z, u_now)
+        self.elapsed += time.perf_counter() - t0
+        nis = _mahalanobis_sq(*est.innovation()) if self.has_innovation else np.full(B, np.nan)
+        self.elapsed += self._update_sensors(list(further), u_now)
+        self.flag(est.failed, k, lambda i: est.failure_reasons.get(i, "flagged by the estimator"))
+
+        err = model.boxminus(est.mean, truth)
+        with np.errstate(invalid="ignore"):
+            too_big = ~(np.abs(err) <= self.bound).all(-1)
+        self.flag(too_big, k, f"state error beyond divergence_bound={self.bound}")
+        nees = _mahalanobis_sq(err, _covariance_factor(est))
+        if not self.is_cloud:
+            self.flag(~np.isfinite(nees), k, "covariance not positive definite")
+        nees_ok = np.isfinite(nees)
+
+        alive = ~self.diverged
+        self.sq[alive] += err[alive] ** 2
+        self.csq[alive] += (self.companion[alive] - companion_truth[alive]) ** 2
+        self.dsq[alive] += model.derived_errors(est.mean[alive], truth[alive]) ** 2
+        self.steps[alive] += 1
+        counted = alive & nees_ok
+        self.nees_sum[counted] += nees[counted]
+        self.nees_steps[counted] += 1
+        self.nis_sum[alive] += nis[alive]
+        self.alive_t[k] = alive.sum()
+        self.sq_t[k] = (err[alive] ** 2).sum(axis=0)
+        if counted.any():
+            self.nees_t[k] = nees[counted].mean()
+        if alive.any():
+            self.nis_t[k] = nis[alive].mean()
+        self._record(k)
+
+    def result(self) -> EstimatorResult:
+        """The accumulated metrics (call once, after the last step)."""
+        est, B = self.est, self.diverged.shape[0]
+        saved = {"estimate": self.est_hist, "std": self.std_hist, "companion": self.comp_hist}
+        diagnostics = {
+            key: np.where(self.diverged, np.nan, np.asarray(v, dtype=float)) for key, v in est.diagnostics().items()
+        }
+        return EstimatorResult(
+            name=self.name, sq_error_sum=self.sq, companion_sq_error_sum=self.csq, steps=self.steps,
+            nees_sum=self.nees_sum, nis_sum=self.nis_sum, nees_mean_t=self.nees_t, nis_mean_t=self.nis_t,
+            sq_error_t=self.sq_t, alive_t=self.alive_t, diverged=self.diverged, diverged_step=self.diverged_step,
+            reasons=self.reasons, step_time_us=self.elapsed / self.K / B * 1e6, saved=saved,
+            sensor_nis=self.sensor_nis, nees_steps=self.nees_steps, diagnostics=diagnostics,
+            derived_sq_error_sum=self.dsq,
+        )  # fmt: skip
+
+
 def run_estimator(
     name: str,
     est: Estimator,
@@ -142,119 +320,28 @@ def run_estimator(
     divergence_bound: float,
     saved_runs: int = 0,
     progress: bool = False,
+    crashes: tuple[np.ndarray, dict[int, str]] | None = None,
 ) -> EstimatorResult:
-    """Filter every run of ``data`` with ``est`` and accumulate the metrics."""
-    model = data.model
-    B, K1 = data.truth.shape[:2]
-    n = model.n_err
-    K = K1 - 1
-    nc = data.companion_truth.shape[-1]
-    saved_runs = min(saved_runs, B)
-    sq = np.zeros((B, n))
-    csq = np.zeros((B, nc))
-    steps = np.zeros(B)
-    nees_sum, nis_sum, nees_steps = np.zeros(B), np.zeros(B), np.zeros(B)
-    nees_t, nis_t, alive_t = np.full(K1, np.nan), np.full(K1, np.nan), np.zeros(K1)
-    sq_t = np.zeros((K1, n))
-    diverged = np.zeros(B, dtype=bool)
-    diverged_step = np.full(B, -1)
-    reasons: dict[int, str] = {}
-    est_hist = np.full((saved_runs, K1, data.truth.shape[-1]), np.nan)
-    std_hist = np.full((saved_runs, K1, n), np.nan)
-    comp_hist = np.full((saved_runs, K1, nc), np.nan)
+    """Filter every run of ``data`` with ``est`` and accumulate the metrics.
 
-    def flag(mask: np.ndarray, k: int, why) -> None:
-        for i in np.flatnonzero(mask & ~diverged):
-            diverged[i], diverged_step[i] = True, k
-            reasons[int(i)] = why(int(i)) if callable(why) else why
-
-    def record(k: int) -> None:
-        """Keep the first ``saved_runs`` series; a diverged run shows NaN, not its placeholder."""
-        if not saved_runs:
-            return
-        keep = ~diverged[:saved_runs, None]
-        est_hist[:, k] = np.where(keep, est.mean[:saved_runs], np.nan)
-        var = np.diagonal(est.covariance[:saved_runs], axis1=-2, axis2=-1)
-        std_hist[:, k] = np.where(keep, np.sqrt(np.clip(var, 0, None)), np.nan)
-        comp_hist[:, k] = np.where(keep, companion[:saved_runs], np.nan)
-
-    elapsed = 0.0
-    if "random" in est.capabilities:
-        est.set_generators([np.random.default_rng(seed) for seed in data.estimator_seeds])
-    t0 = time.perf_counter()
-    P0 = np.broadcast_to(data.P0, (B, n, n)).copy()
-    est.initialize(data.x0.copy(), P0)
-    elapsed += time.perf_counter() - t0
-    companion = data.companion0.copy()
-    record(0)
-    has_innovation = "innovation" in est.capabilities
-    is_cloud = "cloud" in est.capabilities
-    sensor_nis = {name: (np.zeros(B), np.zeros(B)) for name in data.sensors}
-
-    def update_sensors(k: int, u_now: np.ndarray) -> float:
-        """Further sensors available at step k, in order, with their NIS; returns the filter time."""
-        spent = 0.0
-        for sensor_name, sensor in data.sensors.items():
-            if not sensor.available[k]:
-                continue
-            t0 = time.perf_counter()
-            est.update(sensor.values[:, k], u_now, sensor=sensor_name)
-            spent += time.perf_counter() - t0
-            if has_innovation:
-                total, count = sensor_nis[sensor_name]
-                nis_s = _mahalanobis_sq(*est.innovation())
-                live = ~diverged & np.isfinite(nis_s)
-                total[live] += nis_s[live]
-                count[live] += 1
-        return spent
-
+    ``crashes`` = (crash step (B,), −1 for none; run → reason) ends the runs of a closed-loop
+    flight that crashed: each is flagged at the sample after its crash and stops counting."""
+    tracker = EstimatorTracker(
+        name, est, data.model, FilterStart.of(data), data.time.size - 1, divergence_bound, saved_runs,
+        tuple(data.sensors),
+    )  # fmt: skip
     bar = tqdm(
-        total=K, desc=f"{name:>8s}", unit="step", disable=None if progress else True, leave=False, mininterval=0.5
-    )
-    for k in range(1, K1):
-        next_companion = model.companion_step(companion, est.mean)
-        u_prev = model.filter_input(data.inputs[:, k - 1], companion)
-        companion = next_companion
-        u_now = model.filter_input(data.inputs[:, k], companion)
-        t0 = time.perf_counter()
-        est.predict(u_prev)
-        est.update(data.measurements[:, k], u_now)
-        elapsed += time.perf_counter() - t0
-        nis = _mahalanobis_sq(*est.innovation()) if has_innovation else np.full(B, np.nan)
-        elapsed += update_sensors(k, u_now)
-        flag(est.failed, k, lambda i: est.failure_reasons.get(i, "flagged by the estimator"))
-
-        err = model.boxminus(est.mean, data.truth[:, k])
-        with np.errstate(invalid="ignore"):
-            too_big = ~(np.abs(err) <= divergence_bound).all(-1)
-        flag(too_big, k, f"state error beyond divergence_bound={divergence_bound}")
-        nees = _mahalanobis_sq(err, _covariance_factor(est))
-        if not is_cloud:
-            flag(~np.isfinite(nees), k, "covariance not positive definite")
-        nees_ok = np.isfinite(nees)
-
-        alive = ~diverged
-        sq[alive] += err[alive] ** 2
-        csq[alive] += (companion[alive] - data.companion_truth[alive, k]) ** 2
-        steps[alive] += 1
-        counted = alive & nees_ok
-        nees_sum[counted] += nees[counted]
-        nees_steps[counted] += 1
-        nis_sum[alive] += nis[alive]
-        alive_t[k] = alive.sum()
-        sq_t[k] = (err[alive] ** 2).sum(axis=0)
-        if counted.any():
-            nees_t[k] = nees[counted].mean()
-        if alive.any():
-            nis_t[k] = nis[alive].mean()
-        record(k)
+        total=tracker.K, desc=f"{name:>8s}", unit="step", disable=None if progress else True, leave=False,
+        mininterval=0.5,
+    )  # fmt: skip
+    crash_step, crash_reasons = crashes if crashes is not None else (np.full(data.x0.shape[0], -1), {})
+    for k in range(1, tracker.K + 1):
+        tracker.flag((crash_step >= 0) & (crash_step < k), k, lambda i: f"vehicle crashed: {crash_reasons[i]}")
+        further = [(s, rec.values[:, k]) for s, rec in data.sensors.items() if rec.available[k]]
+        tracker.step(
+            k, data.inputs[:, k - 1], data.inputs[:, k], data.measurements[:, k], data.truth[:, k],
+            data.companion_truth[:, k], further,
+        )  # fmt: skip
         bar.update()
     bar.close()
-    saved = {"estimate": est_hist, "std": std_hist, "companion": comp_hist}
-    diagnostics = {key: np.where(diverged, np.nan, np.asarray(v, dtype=float)) for key, v in est.diagnostics().items()}
-    return EstimatorResult(
-        name=name, sq_error_sum=sq, companion_sq_error_sum=csq, steps=steps, nees_sum=nees_sum, nis_sum=nis_sum,
-        nees_mean_t=nees_t, nis_mean_t=nis_t, sq_error_t=sq_t, alive_t=alive_t, diverged=diverged,
-        diverged_step=diverged_step, reasons=reasons, step_time_us=elapsed / K / B * 1e6, saved=saved,
-        sensor_nis=sensor_nis, nees_steps=nees_steps, diagnostics=diagnostics,
-    )  # fmt: skip
+    return tracker.result()

@@ -1,2 +1,3 @@
 """The shared quadrotor: OS4 rigid body with rotors and motors, backstepping controller,
-scenarios, and the truth simulation that flies them (``../shared/reference/quadrotor.md``)."""
+scenarios, the truth simulation that flies them, and the plant the closed loop steps
+(``../shared/reference/quadrotor.md``)."""

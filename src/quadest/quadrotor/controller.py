@@ -9,8 +9,13 @@ gives ``V̇ = −α1 z1² − α2 z2²`` for ``V = (z1² + z2²)/2``. The transl
 desired thrust-acceleration vector, from which the thrust U1 and (in position mode) the roll and
 pitch references follow; the three Euler-angle channels produce the torques, using the full
 Euler-angle dynamics of thesis eq. 5.31 as ``f`` and ``β = W⁻¹ I⁻¹``. Rotor speeds follow by
-inverting the mixer, clipped to the motor limits. The controller sees the true state (estimator
-out of the loop, as in seed 003's baseline).
+inverting the mixer, clipped to the motor limits.
+
+The controller reads whatever 16-state it is handed. In the open loop
+(:func:`~quadest.quadrotor.simulate.simulate_truth`) and with ``loop: truth`` that is the true
+state: an idealisation that matches neither arm of seed 003, whose baseline ("EKF out") feeds the
+controller the noisy measured states, and whose other arm feeds it the EKF's estimate. Those two
+are ``loop: measured`` and ``loop: estimate`` (:mod:`quadest.closed_loop`, docs/closed-loop.md).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Reference trajectories the controller flies: ``hover``, ``attitude_steps`` and ``figure8``.
+"""Reference trajectories the controller flies: ``hover``, ``attitude_steps``, ``figure8`` and
+``platform_approach``.
 
 Every scenario starts at rest on the ground at the origin, with the rotors at hover speed, and
 takes off smoothly to its altitude. References are smooth (quintic transitions), so the
@@ -162,8 +163,46 @@ class Figure8(Scenario):
         return ref
 
 
+@dataclass
+class PlatformApproach(Scenario):
+    """Approach a platform moving straight at constant velocity and end above it (scenario
+    ``platform_approach``; seed 004's landing: 60 m from the platform at the start, 2 m above it at
+    the end, the platform at 2 m/s).
+
+    The platform's reference point moves as ``p_P(t) = platform_start + t · platform_velocity``. The
+    reference blends the take-off point ``A(t) = [0, 0, z_takeoff(t)]`` into ``B(t) = p_P(t) +
+    [0, 0, final_height]`` with the quintic ``s(t)`` of :func:`smooth_step` over
+    ``[0, approach_time]``: ``r = A + s (B − A)``, its derivatives by the product rule. The vehicle
+    starts at rest and, from ``approach_time`` on, holds ``B(t)`` with the platform's velocity.
+    """
+
+    name: str = "platform_approach"
+    altitude: float = 5.0
+    takeoff_time: float = 5.0
+    platform_start: list[float] = field(default_factory=lambda: [60.0, 0.0, 1.0])
+    platform_velocity: list[float] = field(default_factory=lambda: [2.0, 0.0, 0.0])
+    final_height: float = 2.0
+    approach_time: float = 30.0
+
+    def platform_position(self, t: np.ndarray | float) -> np.ndarray:
+        """The platform's reference point (..., 3) at times ``t`` (...)."""
+        t = np.asarray(t, dtype=float)[..., None]
+        return np.asarray(self.platform_start, dtype=float) + t * np.asarray(self.platform_velocity, dtype=float)
+
+    def reference(self, t: float) -> Reference:
+        ref = super().reference(t)
+        s, ds, dds = smooth_step(t, 0.0, self.approach_time)
+        gap = self.platform_position(t) + np.array([0.0, 0.0, self.final_height]) - ref.position
+        gap_rate = np.asarray(self.platform_velocity, dtype=float) - ref.velocity
+        ref.acceleration = ref.acceleration + dds * gap + 2.0 * ds * gap_rate - s * ref.acceleration
+        ref.position = ref.position + s * gap
+        ref.velocity = ref.velocity + ds * gap + s * gap_rate
+        return ref
+
+
 SCENARIOS: dict[str, type[Scenario]] = {
     "hover": Hover,
     "attitude_steps": AttitudeSteps,
     "figure8": Figure8,
+    "platform_approach": PlatformApproach,
 }

@@ -1,4 +1,6 @@
-"""Truth simulation: the controller flies the quadrotor along a scenario, batched over runs."""
+"""Truth simulation: the controller flies the quadrotor along a scenario, batched over runs,
+reading the true state (the open loop; :mod:`quadest.quadrotor.plant` steps the same truth one
+sample at a time for the closed loop)."""
 
 from __future__ import annotations
 
@@ -61,6 +63,10 @@ def simulate_truth(
             break
         for _ in range(substeps):
             state = rk4_step(params, state, cmd, h)
-    U, _ = rotor_inputs(params, states[..., 12:16])
-    f_b = specific_force(params, states[..., 6:9], states[..., 3:6], U[..., 0])
-    return TruthTrajectory(time, states, f_b, commands)
+    return TruthTrajectory(time, states, truth_specific_force(params, states), commands)
+
+
+def truth_specific_force(params: QuadrotorParams, state: np.ndarray) -> np.ndarray:
+    """What an ideal accelerometer measures (..., 3) for the 16-state truth ``state`` (..., 16)."""
+    U, _ = rotor_inputs(params, state[..., 12:16])
+    return specific_force(params, state[..., 6:9], state[..., 3:6], U[..., 0])

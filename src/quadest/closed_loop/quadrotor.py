@@ -1,0 +1,152 @@
+"""The closed loop of ``model=quadrotor``: the plant's draws, the controller, the references, and
+the three ways of flying it.
+
+- ``truth`` and ``measured``: the flight does not depend on any estimator, so it is flown once
+  and measured exactly as the open loop measures its truth
+  (:func:`~quadest.models.quadrotor_data.record_quadrotor_data`); every estimator then runs on the
+  same data. With ``truth`` the flight is the open loop's, bit for bit.
+- ``estimate``: each estimator flies its own plant, stepped together with it (all runs of one
+  estimator and its plants as one batch), from the same draws as every other estimator.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from quadest.closed_loop.config import closed_loop_settings
+from quadest.closed_loop.control_metrics import StepEvent, control_metrics, step_events
+from quadest.closed_loop.feedback import EstimateFeedback, StateSensorFeedback, TruthFeedback
+from quadest.closed_loop.loop import CrashLimits, Flight, fly
+from quadest.estimators.base import Estimator
+from quadest.models.quadrotor import QuadrotorFilterModel
+from quadest.models.quadrotor_config import controller_gains, quadrotor_params, scenario
+from quadest.models.quadrotor_data import (
+    data_labels,
+    draw_plant,
+    initial_condition,
+    quadrotor_filter_model,
+    record_quadrotor_data,
+)
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.data import sample_count
+from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.quadrotor.controller import BacksteppingController
+from quadest.quadrotor.plant import PlantDraws, QuadrotorPlant
+from quadest.quadrotor.scenarios import AttitudeSteps, Reference, Scenario
+from quadest.runner import EstimatorResult, EstimatorTracker, FilterStart
+
+
+@dataclass
+class QuadrotorLoop:
+    """Everything a closed-loop job of ``model=quadrotor`` flies with, built once from the config."""
+
+    cfg: object
+    flown: Scenario
+    draws: PlantDraws
+    controller: BacksteppingController
+    references: list[Reference]
+    limits: CrashLimits
+    state_std: np.ndarray
+    events: list[StepEvent]
+    band: float
+    steady_window: float
+
+    @classmethod
+    def from_config(cls, cfg) -> QuadrotorLoop:
+        T = float(cfg.sample_period)
+        settings = closed_loop_settings(cfg.closed_loop)
+        flown = scenario(cfg.scenario)
+        time = np.arange(sample_count(float(cfg.duration), T) + 1) * T
+        streams = run_streams(int(cfg.seed), int(cfg.runs))
+        params = quadrotor_params(cfg.model)
+        return cls(
+            cfg=cfg,
+            flown=flown,
+            draws=draw_plant(cfg, streams, flown),
+            controller=BacksteppingController(params, controller_gains(cfg.model.controller)),
+            references=[flown.reference(t) for t in time],
+            limits=CrashLimits(settings.max_tilt, settings.ground_depth),
+            state_std=settings.state_sensor.std(),
+            events=step_events(flown.steps, float(cfg.duration)) if isinstance(flown, AttitudeSteps) else [],
+            band=settings.settling_band,
+            steady_window=settings.steady_window,
+        )
+
+    def plant(self) -> QuadrotorPlant:
+        """A fresh batch of plants at sample 0, from the runs' draws."""
+        c = self.cfg
+        return QuadrotorPlant(
+            self.controller.params, self.draws, float(c.sample_period), int(c.model.truth_substeps),
+            int(c.sensor.encoder.lines),
+        )  # fmt: skip
+
+    def reference_array(self) -> np.ndarray:
+        """(K+1, 16) the references laid out as the truth (position and Euler-angle slots)."""
+        out = np.zeros((len(self.references), 16))
+        for k, ref in enumerate(self.references):
+            out[k, 0:3], out[k, 6:9] = ref.position, ref.attitude
+        return out
+
+    def metrics(self, flight: Flight) -> dict[str, np.ndarray]:
+        """Per-run control metrics of ``flight``; NaN for crashed runs."""
+        tr = flight.truth
+        out = control_metrics(
+            tr.time, tr.state, self.reference_array(), tr.command, self.controller.params.hover_speed,
+            self.references[-1].attitude_mode, self.events, self.band, self.steady_window,
+        )  # fmt: skip
+        return {key: np.where(flight.crashed, np.nan, value) for key, value in out.items()}
+
+    def fly_shared(self, loop: str) -> tuple[Flight, MonteCarloData]:
+        """``loop`` = ``truth`` or ``measured``: fly once and measure the flight as the open loop
+        measures its truth (fresh streams, the same draws)."""
+        feedback = TruthFeedback() if loop == "truth" else StateSensorFeedback(self.state_std)
+        flight = fly(self.plant(), self.controller, self.references, feedback, self.limits)
+        return flight, record_quadrotor_data(self.cfg, self._streams(), self.flown, flight.truth)
+
+    def filter_model(self) -> QuadrotorFilterModel:
+        """The filter model of the job, bound to the runs' assumed sensor errors."""
+        return quadrotor_filter_model(self.cfg, self.draws.accel_errors, self.draws.gyro_errors)
+
+    def _flight_data(self, model: QuadrotorFilterModel, states: np.ndarray) -> MonteCarloData:
+        """The data of one estimator's flight of 16-states ``states`` (B, K+1, 16): truth and
+        companion truth; the inputs and measurements were consumed in the loop and are not kept."""
+        cfg = self.cfg
+        B, K1 = states.shape[:2]
+        x0, P0 = initial_condition(cfg, model.state_names, model.truth_to_state(states[:, 0]), self._streams())
+        return MonteCarloData(
+            model=model, time=np.arange(K1) * float(cfg.sample_period), truth=model.truth_to_state(states),
+            companion_truth=model.truth_to_companion(states), inputs=np.empty((B, K1, 0)),
+            measurements=np.empty((B, K1, 0)), x0=x0, P0=P0, companion0=model.truth_to_companion(states[:, 0]),
+            estimator_seeds=run_seed_sequences(int(cfg.seed), B)["estimator"], labels=data_labels(cfg, self.flown),
+        )  # fmt: skip
+
+    def _streams(self) -> dict:
+        return run_streams(int(self.cfg.seed), int(self.cfg.runs))
+
+    def empty_data(self, model: QuadrotorFilterModel) -> MonteCarloData:
+        """The data of an estimator that could not fly: its truth after sample 0 is NaN."""
+        plant = self.plant()
+        states = np.full((plant.state.shape[0], len(self.references), 16), np.nan)
+        states[:, 0] = plant.state
+        return self._flight_data(model, states)
+
+    def fly_estimator(
+        self, name: str, est: Estimator, bound: float, saved_runs: int
+    ) -> tuple[EstimatorResult, Flight, MonteCarloData]:
+        """``loop: estimate``: ``est`` (built on :meth:`filter_model`) flies its own plants, from the
+        same draws as every other estimator. Returns its result (scored against its own truth,
+        which it carries), its flight, and the data of its flight."""
+        plant = self.plant()
+        model = est.model
+        start_data = self._flight_data(model, plant.state[:, None])
+        tracker = EstimatorTracker(
+            name, est, model, FilterStart.of(start_data), len(self.references) - 1, bound, saved_runs
+        )
+        flight = fly(plant, self.controller, self.references, EstimateFeedback(tracker, plant), self.limits)
+        data = self._flight_data(model, flight.truth.state)
+        own = replace(
+            tracker.result(), truth=data.truth[:saved_runs], companion_truth=data.companion_truth[:saved_runs]
+        )
+        return own, flight, data

@@ -1,0 +1,77 @@
+"""The loop modes of a sweep side by side: one control table with 95 % confidence intervals and the
+roll and pitch tracking figure (``hydra.callbacks`` in an experiment file: ``_target_:
+quadest.closed_loop.report.ClosedLoopReport``), written to ``<sweep>/closed_loop/``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+from hydra.experimental.callback import Callback
+
+from quadest.closed_loop.control_metrics import step_events, summarize_control
+from quadest.closed_loop.figures import plot_tracking
+from quadest.formatting import markdown_table
+
+
+def _format(row: pd.Series) -> str:
+    if not np.isfinite(row["mean"]):
+        return "-"
+    ci = f" [{row['ci_lo']:.3g}, {row['ci_hi']:.3g}]" if np.isfinite(row["ci_lo"]) else ""
+    count = f" (n={row['n']})" if row["n"] < row["runs"] else ""
+    return f"{row['mean']:.3g}{ci}{count}"
+
+
+def control_report(sweep_dir: Path) -> Path:
+    """Collect every job's ``control_metrics.csv`` and ``timeseries.npz`` under ``sweep_dir`` into
+    ``sweep_dir/closed_loop/``: ``control_summary.csv`` (mean, CI, n per loop, flight and metric),
+    ``control_table.md`` (one column per flight) and ``tracking.png``; returns the table's path."""
+    sweep_dir = Path(sweep_dir)
+    out = sweep_dir / "closed_loop"
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = sorted(p.parent for p in sweep_dir.glob("*/control_metrics.csv"))
+    table = pd.concat([pd.read_csv(job / "control_metrics.csv") for job in jobs], ignore_index=True)
+    summary = summarize_control(table, ["loop", "flown_by"])
+    summary.to_csv(out / "control_summary.csv", index=False)
+    summary["column"] = summary["loop"] + ": " + summary["flown_by"]
+    summary["cell"] = summary.apply(_format, axis=1)
+    wide = summary.pivot(index="metric", columns="column", values="cell").reindex(summary["metric"].unique())
+    crashes = table.drop_duplicates(["loop", "flown_by", "run"]).groupby(["loop", "flown_by"])["crashed"].sum()
+    lines = [
+        "# Control metrics per loop mode (mean [95 % CI] over the runs; n: runs with a value)",
+        "",
+        markdown_table(wide.reset_index()),
+        "",
+        "Crashed runs: " + ", ".join(f"{loop}: {name} {int(n)}" for (loop, name), n in crashes.items()),
+        "",
+    ]
+    (out / "control_table.md").write_text("\n".join(lines))
+
+    cfg = yaml.safe_load((jobs[0] / "config.yaml").read_text())
+    steps = cfg["scenario"].get("steps", [])
+    events = step_events(steps, float(cfg["duration"]))
+    responses, time, reference = {}, None, None
+    for job in jobs:
+        series = job / "timeseries.npz"
+        if not series.is_file():
+            continue
+        with np.load(series) as arrays:
+            time, reference = arrays["time"], arrays["reference"]
+            loop = pd.read_csv(job / "control_metrics.csv")["loop"].iloc[0]
+            for key in arrays.files:
+                if key.startswith("flight/") and key.endswith("/truth"):
+                    name = key.split("/")[1]
+                    responses[loop if name == loop else f"{loop}: {name}"] = arrays[key][0]
+    if responses:
+        plot_tracking(time, reference, responses, events, out / "tracking.png",
+                      "Roll and pitch tracking, run 0: estimator in the loop vs noisy-state feedback")  # fmt: skip
+    return out / "control_table.md"
+
+
+class ClosedLoopReport(Callback):
+    """Hydra callback: tabulate the loop modes of the sweep when the multirun ends."""
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        print(f"Closed-loop report: {control_report(Path(config.hydra.sweep.dir))}")
