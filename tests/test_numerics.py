@@ -181,3 +181,52 @@ def test_cholupdate_leaves_its_inputs_alone():
         cholupdate(S, v, 0.5)
         np.testing.assert_array_equal(S, S0)
         np.testing.assert_array_equal(v, v0)
+
+
+def test_cholupdate_of_an_empty_factor_is_empty():
+    """A model without a primary measurement (``model=ins``) has a 0 × 0 innovation factor."""
+    out = cholupdate(np.zeros((3, 0, 0)), np.zeros((3, 0, 2)), -1.0)
+    assert out.shape == (3, 0, 0)
+
+
+def _linearized_problem(seed: int, B: int = 3, n: int = 4, m: int = 2):
+    """Random SPD ``P`` (B, n, n), ``R`` (m, m), a Jacobian ``H`` (B, m, n) and the optimal gain."""
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((B, n, n))
+    P = A @ np.swapaxes(A, -1, -2) / n + 0.3 * np.eye(n)
+    C = rng.standard_normal((m, m))
+    R = C @ C.T / m + 0.2 * np.eye(m)
+    H = rng.standard_normal((B, m, n))
+    S = H @ P @ np.swapaxes(H, -1, -2) + R
+    K_opt = np.linalg.solve(S, H @ P).swapaxes(-1, -2)  # P Hᵀ S⁻¹ (S symmetric)
+    return rng, P, H, R, S, K_opt
+
+
+def test_joseph_covariance_matches_filterpy_update():
+    """filterpy's ``KalmanFilter.update`` (Joseph form) run by run is the independent reference;
+    the two differ by round-off only."""
+    from filterpy.kalman import KalmanFilter
+
+    from quadest.numerics.joseph import joseph_covariance
+
+    _, P, H, R, _, K_opt = _linearized_problem(11)
+    out = joseph_covariance(P, H, R, K_opt)
+    for b in range(P.shape[0]):
+        kf = KalmanFilter(dim_x=P.shape[-1], dim_z=R.shape[0])
+        kf.P, kf.H, kf.R = P[b].copy(), H[b], R
+        kf.update(np.zeros(R.shape[0]))
+        np.testing.assert_allclose(out[b], kf.P, rtol=1e-12, atol=1e-14)
+
+
+def test_joseph_covariance_of_any_gain_is_the_optimum_plus_the_gain_error_term():
+    """For every gain, ``(I − K H) P (I − K H)ᵀ + K R Kᵀ = P_opt + (K − K*) S (K − K*)ᵀ`` with
+    ``K* = P Hᵀ S⁻¹`` (complete the square): the identity the short form ``(I − K H) P`` fails
+    off the optimum. Tolerance: round-off of O(1) matrices."""
+    from quadest.numerics.joseph import joseph_covariance
+
+    rng, P, H, R, S, K_opt = _linearized_problem(12)
+    P_opt = P - K_opt @ S @ np.swapaxes(K_opt, -1, -2)
+    dK = 0.5 * rng.standard_normal(K_opt.shape)
+    expected = P_opt + dK @ S @ np.swapaxes(dK, -1, -2)
+    np.testing.assert_allclose(joseph_covariance(P, H, R, K_opt + dK), expected, rtol=1e-11, atol=1e-12)
+    np.testing.assert_allclose(joseph_covariance(P, H, R, K_opt), P_opt, rtol=1e-11, atol=1e-12)

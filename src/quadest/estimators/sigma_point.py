@@ -17,6 +17,12 @@ second update in the same step (another sensor) draws ``[x; v]`` afresh.
 
 States that are not vectors: points are ``x ⊞ offset`` and deviations ``Y ⊟ ȳ`` with the model's
 ``boxplus``/``boxminus``; the mean is ``Y0 ⊞ Σ wm_i (Y_i ⊟ Y0)``.
+
+The step from the moments (``ν``, ``Pxy``, ``Pyy``) to the posterior is one hook,
+:meth:`SigmaPointFilter._measurement_update`: the Kalman update, or with ``huber`` settings the
+Huber M-estimation update (Karlgaard & Schaub 2007; :mod:`quadest.numerics.huber`) for the runs
+with a whitened residual beyond γ. The innovation and its factor (NIS) stay the parent's: the
+sigma-point ``Pyy`` with the nominal R.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from quadest.errors import DowndateError
 from quadest.estimators.base import Estimator
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, cholupdate, kalman_gain, psd_sqrt, qr_factor
+from quadest.numerics.huber import HuberCounts, HuberSettings, huber_update
 from quadest.numerics.rules import IntegrationRule, rule_mean
 
 
@@ -56,8 +63,11 @@ class SigmaPointFilter(Estimator):
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
 
-    def __init__(self, model: FilterModel, rule: IntegrationRule, augmented: bool = False) -> None:
+    def __init__(
+        self, model: FilterModel, rule: IntegrationRule, augmented: bool = False, huber: HuberSettings | None = None
+    ) -> None:
         super().__init__(model)
+        self.huber = huber
         if augmented and not model.supports_augmented:
             raise ValueError(f"model '{model.name}' does not support augmented: true (its noise cannot join the state)")
         self.rule = rule
@@ -99,6 +109,10 @@ class SigmaPointFilter(Estimator):
     def _posterior(self, K, spread_y, DX, DY, dim: int, sqrt_R: np.ndarray | None) -> None:
         """Posterior spread after the gain ``K`` (eqs 5.28–5.29)."""
 
+    @abstractmethod
+    def _set_factor(self, runs: np.ndarray, factor: np.ndarray) -> None:
+        """Store the posterior of ``runs`` given by its lower factor (the Huber update's)."""
+
     # --- shared steps ---
 
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
@@ -111,6 +125,7 @@ class SigmaPointFilter(Estimator):
         self._nu = np.zeros((B, self.model.m))
         self._Sy = np.broadcast_to(self.sqrt_R, (B, *self.sqrt_R.shape)).copy()
         self._carried: tuple[np.ndarray, np.ndarray, int] | None = None
+        self._huber_counts = HuberCounts(B)
 
     def _broadcast(self, M: np.ndarray) -> np.ndarray:
         return np.broadcast_to(M, (self.x.shape[0], *M.shape))
@@ -182,11 +197,30 @@ class SigmaPointFilter(Estimator):
         Sy = self._innovation_factor(spread_y)
         DX = self.model.boxminus(X, self.x[:, None, :])
         Pxy = self.rule.cross_covariance(DX, DY, dim)  # (5.25)
-        K = kalman_gain(Pxy, Sy)  # (5.26)
         self._nu, self._Sy = z - y_pred, Sy
-        self.x = self.model.boxplus(self.x, (K @ self._nu[..., None])[..., 0])  # (5.27)
-        self._posterior(K, spread_y, DX, DY, dim, sqrt_R)  # (5.28)–(5.29)
+        self._measurement_update(Pxy, spread_y, DX, DY, dim, sqrt_R)
         self.quarantine(self.x, self._spread_state(), self._x_safe, self._spread_safe)
+
+    def _measurement_update(self, Pxy, spread_y, DX, DY, dim: int, sqrt_R: np.ndarray | None) -> None:
+        """From the moments to the posterior: gain (5.26), mean (5.27) and spread (5.28)–(5.29);
+        with ``huber`` settings, the runs with an outlying whitened residual take the Huber
+        M-estimate and its covariance instead (:func:`~quadest.numerics.huber.huber_update`)."""
+        K = kalman_gain(Pxy, self._Sy)  # (5.26)
+        correction = (K @ self._nu[..., None])[..., 0]
+        step = None
+        if self.huber is not None:
+            step = huber_update(self._nu, Pxy, self._Sy, self._factor(), correction, self.huber)
+            correction = step.correction
+        self.x = self.model.boxplus(self.x, correction)  # (5.27)
+        self._posterior(K, spread_y, DX, DY, dim, sqrt_R)  # (5.28)–(5.29)
+        if step is not None:
+            if step.robust.any():
+                self._set_factor(np.flatnonzero(step.robust), step.factor[step.robust])
+            self._huber_counts.add(step)
+
+    def diagnostics(self) -> dict[str, np.ndarray]:
+        """With Huber settings, the IRLS counts per run (:class:`~quadest.numerics.huber.HuberCounts`)."""
+        return {} if self.huber is None else self._huber_counts.diagnostics()
 
     @property
     def mean(self) -> np.ndarray:
@@ -233,6 +267,9 @@ class SigmaPointKalmanFilter(SigmaPointFilter):
     def _posterior(self, K, Pyy, DX, DY, dim: int, sqrt_R: np.ndarray | None) -> None:
         P = self.P - K @ Pyy @ _t(K)
         self.P = 0.5 * (P + _t(P))
+
+    def _set_factor(self, runs: np.ndarray, factor: np.ndarray) -> None:
+        self.P[runs] = factor @ _t(factor)
 
     @property
     def covariance(self) -> np.ndarray:
@@ -285,6 +322,9 @@ class SquareRootSigmaPointFilter(SigmaPointFilter):
         if sqrt_R is not None:
             cols = np.concatenate([cols, K @ sqrt_R], axis=-1)
         self.S = qr_factor(cols)
+
+    def _set_factor(self, runs: np.ndarray, factor: np.ndarray) -> None:
+        self.S[runs] = factor
 
     @property
     def covariance(self) -> np.ndarray:

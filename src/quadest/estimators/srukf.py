@@ -5,12 +5,15 @@ State per run: the mean ``x`` (n,) and a lower-triangular factor ``S`` (n, n) wi
 The whole batch advances in one call per step: sigma points (B, 2n+1, n) go through the model's
 ``f`` and ``h`` at once; ``qr`` and ``cholupdate`` are batched (:mod:`quadest.numerics`). The
 W0 downdate (eqs 5.19, 5.24) is the unscented rule's (:class:`~quadest.numerics.rules.UnscentedRule`).
+``robust: true`` replaces the Kalman update by the Huber M-estimation update (Karlgaard & Schaub
+2007; :mod:`quadest.estimators.huber`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from quadest.estimators.huber import DEFAULT, HuberParams, huber_settings
 from quadest.estimators.params import ranged, unscented_constraints
 from quadest.estimators.sigma_point import SquareRootSigmaPointFilter
 from quadest.models.base import FilterModel
@@ -18,14 +21,16 @@ from quadest.numerics.rules import UnscentedRule
 
 
 @dataclass
-class SRUKFParams:
-    """Configuration of ``estimator=srukf``: the UT scaling parameters (eqs 5.2–5.6)."""
+class SRUKFParams(HuberParams):
+    """Configuration of ``estimator=srukf``: the UT scaling parameters (eqs 5.2–5.6) and the
+    Huber update (``robust``, with the ``huber_*`` settings)."""
 
     kind: str = "srukf"
     alpha: float = ranged(0.5, "spread of the sigma points; typically 1e-4 <= alpha <= 1", gt=0.0)
     beta: float = ranged(2.0, "prior knowledge of the distribution; 2 is optimal for a Gaussian")
     kappa: float = ranged(0.0, "secondary scaling; usually 0 for state estimation")
     augmented: bool = False
+    robust: bool = False
 
     constraints = staticmethod(unscented_constraints)
 
@@ -39,12 +44,24 @@ class SRUKF(SquareRootSigmaPointFilter):
             5.24 then become Cholesky downdates, and a downdate that would make a covariance
             indefinite flags its run as failed (:class:`~quadest.errors.DowndateError`).
         augmented: noise in the sigma-point state (dimension n + q + r), points drawn once per step.
+        robust: the Huber measurement update with threshold ``huber_threshold``, at most
+            ``huber_max_iterations`` IRLS iterations, stopping at ``huber_tolerance``.
     """
 
     config_name = "srukf"
     Params = SRUKFParams
 
     def __init__(
-        self, model: FilterModel, alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0, augmented: bool = False
+        self,
+        model: FilterModel,
+        alpha: float = 0.5,
+        beta: float = 2.0,
+        kappa: float = 0.0,
+        augmented: bool = False,
+        robust: bool = False,
+        huber_threshold: float = DEFAULT.threshold,
+        huber_max_iterations: int = DEFAULT.max_iterations,
+        huber_tolerance: float = DEFAULT.tolerance,
     ) -> None:
-        super().__init__(model, UnscentedRule(float(alpha), float(beta), float(kappa)), augmented)
+        huber = huber_settings(huber_threshold, huber_max_iterations, huber_tolerance) if robust else None
+        super().__init__(model, UnscentedRule(float(alpha), float(beta), float(kappa)), augmented, huber)

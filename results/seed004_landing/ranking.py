@@ -1,0 +1,67 @@
+"""Seed 004's ranking (HHCF > HF > HCKF > EKF) tested on this job (docs/seed004-landing.md).
+
+Per run, the 3-D position and velocity RMSE (root of the sum of the three axes' mean squares) and
+the attitude error angle's RMSE (``error_angle``), then the job's own paired comparison
+(:func:`quadest.paired.paired_comparison`: paired bootstrap CI, Wilcoxon, Holm over the rows of
+this table) for each step of the ranking. Usage: ``python ranking.py [job dir]`` → ``ranking.md``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from quadest.paired import paired_comparison
+
+GROUPS = {"position_3d": ("x", "y", "z"), "velocity_3d": ("vx", "vy", "vz")}
+STEPS = (
+    ("hhcf", "hf"), ("hf", "hckf"), ("hckf", "mekf"),  # seed 004's ranking, step by step
+    ("hhcf", "hckf"), ("hf", "mekf"), ("hckf", "ckf"), ("srukf_huber", "srukf"),  # other steps and Huber vs parent
+)  # fmt: skip
+
+
+def grouped_metrics(metrics: pd.DataFrame) -> pd.DataFrame:
+    """One row per estimator × run × {position_3d, velocity_3d, error_angle}."""
+    keep = ["estimator", "run", "diverged"]
+    wide = metrics.pivot_table(index=["estimator", "run"], columns="state", values="rmse", sort=False)
+    diverged = metrics.groupby(["estimator", "run"], sort=False)["diverged"].any()
+    rows = []
+    for state, axes in GROUPS.items():
+        rows.append(pd.DataFrame({"state": state, "rmse": np.sqrt((wide[list(axes)] ** 2).sum(axis=1))}))
+    rows.append(pd.DataFrame({"state": "error_angle", "rmse": wide["error_angle"]}))
+    out = pd.concat(rows).reset_index().merge(diverged.reset_index(), on=["estimator", "run"])
+    out["unit"] = out["state"].map({"position_3d": "m", "velocity_3d": "m/s", "error_angle": "deg"})
+    out["quantity"] = "filter"
+    return out[keep[:2] + ["state", "unit", "quantity", "rmse", "diverged"]]
+
+
+def main(job: Path) -> None:
+    metrics = pd.read_csv(job / "metrics.csv")
+    names = list(dict.fromkeys(metrics["estimator"]))
+    table = paired_comparison(grouped_metrics(metrics), seed=int(metrics["seed"].iloc[0]))
+    lines = [
+        "| claim | state | runs | better − worse, % of the earlier estimator's RMSE (95 % CI) "
+        "| p Wilcoxon (Holm) | holds? |",
+        "|---|---|---|---|---|---|",
+    ]
+    for better, worse in STEPS:
+        if better not in names or worse not in names:
+            continue
+        ref, est = sorted((better, worse), key=names.index)
+        sign = 1.0 if est == better else -1.0
+        for _, r in table[(table["estimator"] == est) & (table["reference"] == ref)].iterrows():
+            rel, lo, hi = (sign * 100 * r[c] for c in ("rel_diff", "rel_ci_low", "rel_ci_high"))
+            lo, hi = min(lo, hi), max(lo, hi)
+            p = r["p_wilcoxon_holm"]
+            verdict = "not shown" if not p < 0.05 else ("yes" if rel < 0 else "no (reversed)")
+            claim = f"| {better} > {worse} | {r['state']} | {r['runs']} |"
+            lines.append(f"{claim} {rel:+.2f} % [{lo:+.2f}, {hi:+.2f}] | {p:.2g} | {verdict} |")
+    (job / "ranking.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parent)
