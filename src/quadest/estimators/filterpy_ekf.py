@@ -12,6 +12,11 @@ step), :class:`BatchedFilterpyEKF` (``estimator=ekf``) evaluates them once per s
 run of the batch and hands each run's filterpy EKF its rows. A model call costs about the same
 for one point as for a batch (numpy's per-call overhead dominates at this size), so that is
 where the EKF's time went (``docs/benchmarks.md``). The numbers are the same either way.
+
+On a model whose state is not a vector (``model=attitude``, ``model=ins``) filterpy's EKF carries
+the error state about a reference point (:mod:`quadest.estimators.local_coordinates`): ``F`` and
+``H`` are the model's error-state Jacobians ``F_err``/``H_err``, and each update's correction is
+moved into the reference (the multiplicative EKF, Lefferts, Markley & Shuster 1982).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from quadest.estimators.base import PerRunAdapter, SingleRunEstimator
+from quadest.estimators.local_coordinates import LocalCoordinates
 from quadest.models.base import FilterModel
 
 
@@ -49,43 +55,54 @@ class FilterpyEKF(SingleRunEstimator):
 
     def __init__(self, model: FilterModel) -> None:
         super().__init__(model)
-        self.kf = _LinearisedEKF(dim_x=model.n, dim_z=model.m)
+        self.local = LocalCoordinates(model) if model.has_manifold_state else None
+        self.kf = _LinearisedEKF(dim_x=model.n_err, dim_z=model.m)
         self.kf.Q = model.Q.copy()
         self.kf.R = model.R.copy()
 
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
-        self.kf.x = np.array(x0, dtype=float).reshape(-1, 1)
+        if self.local is None:
+            self.kf.x = np.array(x0, dtype=float).reshape(-1, 1)
+        else:
+            self.local.reset(x0)
+            self.kf.x = np.zeros((self.model.n_err, 1))
         self.kf.P = np.array(P0, dtype=float)
 
     def predict(self, u: np.ndarray) -> None:
-        x, u = self.kf.x.T, u[None, :]
-        self.predict_linearised(self.model.F(x, u)[0], self.model.f(x[None], u)[0, 0])
+        x, u = self.mean[None, :], u[None, :]
+        self.predict_linearised(self.model.F_err(x, u)[0], self.model.f(x[None], u)[0, 0])
 
     def predict_linearised(self, F: np.ndarray, fx: np.ndarray) -> None:
-        """Time update given ``F`` (n, n) and ``f`` (n,) evaluated at the current mean."""
+        """Time update given ``F`` (n_err, n_err) and ``f`` (n,) evaluated at the current mean."""
         self.kf.F = F
-        self.kf.predicted = fx.reshape(-1, 1)
+        if self.local is None:
+            self.kf.predicted = fx.reshape(-1, 1)
+        else:
+            self.local.reset(fx)
+            self.kf.predicted = np.zeros((self.model.n_err, 1))
         self.kf.predict()
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
         """Update with the primary measurement or a named sensor (its ``h``, ``R`` and a
         central-difference Jacobian)."""
-        x, u = self.kf.x.T, u[None, :]
+        x, u = self.mean[None, :], u[None, :]
         h = self.model.measurement(sensor).h(x[None], u)[0, 0]
-        self.update_linearised(z, self.model.measurement_jacobian(sensor, x, u)[0], h, sensor)
+        self.update_linearised(z, self.model.H_err(x, u, sensor)[0], h, sensor)
 
     def update_linearised(self, z: np.ndarray, H: np.ndarray, hx: np.ndarray, sensor: str | None = None) -> None:
-        """Measurement update given ``H`` (m, n) and ``h`` (m,) evaluated at the current mean."""
+        """Measurement update given ``H`` (m, n_err) and ``h`` (m,) evaluated at the current mean."""
         self.kf.update(
             np.asarray(z, dtype=float).reshape(-1, 1),
             HJacobian=lambda _: H,
             Hx=lambda _: hx.reshape(-1, 1),
             R=self.model.measurement(sensor).R,
         )
+        if self.local is not None:
+            self.kf.x = self.local.inject(self.kf.x[:, 0])[:, None]
 
     @property
     def mean(self) -> np.ndarray:
-        return self.kf.x[:, 0]
+        return self.kf.x[:, 0] if self.local is None else self.local.origin
 
     @property
     def covariance(self) -> np.ndarray:
@@ -122,13 +139,13 @@ class BatchedFilterpyEKF(PerRunAdapter):
         x = self._points()
         if x is None:
             return
-        F, fx = self.model.F(x, u), self.model.f(x[:, None], u)[:, 0]
+        F, fx = self.model.F_err(x, u), self.model.f(x[:, None], u)[:, 0]
         self._each(lambda i, filt: filt.predict_linearised(F[i], fx[i]))
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
         x = self._points()
         if x is None:
             return
-        H = self.model.measurement_jacobian(sensor, x, u)
+        H = self.model.H_err(x, u, sensor)
         hx = self.model.measurement(sensor).h(x[:, None], u)[:, 0]
         self._each(lambda i, filt: filt.update_linearised(z[i], H[i], hx[i], sensor))

@@ -11,10 +11,16 @@ update overrides filterpy's ``compute_process_sigmas`` hook, and the measurement
 filterpy an ``hx`` that returns the rows of one precomputed ``h`` call in filterpy's call order.
 The numbers are the same as with per-point calls; ``vectorize_points=False`` gives the plain
 per-point use (the benchmark times both).
+
+On a model whose state is not a vector (``model=attitude``, ``model=ins``) the UKF's state is the
+error about a reference point (:mod:`quadest.estimators.local_coordinates`; USQUE, Crassidis &
+Markley 2003): its sigma points are errors, the model functions see ``reference ⊞ error``, and
+each update's mean error is moved into the reference.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -22,6 +28,7 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from quadest.estimators.base import SingleRunEstimator
+from quadest.estimators.local_coordinates import LocalCoordinates
 from quadest.estimators.params import ranged, unscented_constraints
 from quadest.models.base import FilterModel
 from quadest.numerics import ut_weights
@@ -40,19 +47,20 @@ class UKFParams:
 
 
 class _PointBatchedUKF(UnscentedKalmanFilter):
-    """filterpy's UKF with the sigma points of each step evaluated in one model call."""
+    """filterpy's UKF with the sigma points of each step evaluated in one model call of the
+    vectorised ``f_points``/``h_points`` (points (1, P, n), input (1, m_u))."""
 
-    def __init__(self, model: FilterModel, **kwargs) -> None:
+    def __init__(self, f_points: Callable, h_points: Callable, **kwargs) -> None:
         super().__init__(**kwargs)
-        self.model = model
+        self.f_points, self.h_points = f_points, h_points
 
     def compute_process_sigmas(self, dt, fx=None, **fx_args) -> None:
         sigmas = self.points_fn.sigma_points(self.x, self.P)
-        self.sigmas_f = self.model.f(sigmas[None], fx_args["u"][None, :])[0]
+        self.sigmas_f = self.f_points(sigmas[None], fx_args["u"][None, :])[0]
 
     def update(self, z, R=None, UT=None, hx=None, h_points=None, **hx_args) -> None:
-        """``h_points`` (default ``model.h``) is the vectorised measurement function."""
-        h = self.model.h if h_points is None else h_points
+        """``h_points`` (default the primary measurement's) is the vectorised measurement function."""
+        h = self.h_points if h_points is None else h_points
         rows = iter(h(self.sigmas_f[None], hx_args["u"][None, :])[0])
         super().update(z, R=R, UT=UT, hx=lambda x, u: next(rows), **hx_args)
 
@@ -73,43 +81,67 @@ class FilterpyUKF(SingleRunEstimator):
         vectorize_points: bool = True,
     ) -> None:
         super().__init__(model)
-        ut_weights(model.n, alpha, beta, kappa)  # the same checks as the SR-UKF: α > 0, n + λ > 0
-        points = MerweScaledSigmaPoints(model.n, alpha=alpha, beta=beta, kappa=kappa)
-        kwargs = dict(dim_x=model.n, dim_z=model.m, dt=model.dt, hx=self._hx, fx=self._fx, points=points)
-        self.kf = _PointBatchedUKF(model, **kwargs) if vectorize_points else UnscentedKalmanFilter(**kwargs)
+        n = model.n_err
+        ut_weights(n, alpha, beta, kappa)  # the same checks as the SR-UKF: α > 0, n + λ > 0
+        self.local = LocalCoordinates(model) if model.has_manifold_state else None
+        self._f_points = model.f if self.local is None else self.local.f
+        self._h_points = self._sensor_points(model.h)
+        points = MerweScaledSigmaPoints(n, alpha=alpha, beta=beta, kappa=kappa)
+        kwargs = dict(dim_x=n, dim_z=model.m, dt=model.dt, hx=self._hx, fx=self._fx, points=points)
+        self.kf = (
+            _PointBatchedUKF(self._f_points, self._h_points, **kwargs)
+            if vectorize_points
+            else UnscentedKalmanFilter(**kwargs)
+        )
         self.kf.Q = model.Q.copy()
         self.kf.R = model.R.copy()
 
+    def _sensor_points(self, h: Callable) -> Callable:
+        """A measurement function of the model's points as a function of the filter's points."""
+        return h if self.local is None else self.local.measurement(h)
+
     def _fx(self, x: np.ndarray, dt: float, u: np.ndarray) -> np.ndarray:
-        return self.model.f(x[None, None, :], u[None, :])[0, 0]
+        return self._f_points(x[None, None, :], u[None, :])[0, 0]
 
     def _hx(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        return self.model.h(x[None, None, :], u[None, :])[0, 0]
+        return self._h_points(x[None, None, :], u[None, :])[0, 0]
 
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
-        self.kf.x = np.array(x0, dtype=float)
+        if self.local is None:
+            self.kf.x = np.array(x0, dtype=float)
+        else:
+            self.local.reset(x0)
+            self.kf.x = np.zeros(self.model.n_err)
         self.kf.P = np.array(P0, dtype=float)
 
     def predict(self, u: np.ndarray) -> None:
+        if self.local is None:
+            self.kf.predict(u=u)
+            return
+        self.local.advance(u)
         self.kf.predict(u=u)
+        self.local.settle()
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
         """Update with the primary measurement or a named sensor (its ``h`` and ``R``)."""
         if sensor is None:
             self.kf.update(z, u=u)
-            return
-        meas = self.model.measurement(sensor)
-        # filterpy updates with the points of its last predict; a further sensor in the same step
-        # must see points of the state after the previous update (no time passes between them).
-        self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
-        if isinstance(self.kf, _PointBatchedUKF):
-            self.kf.update(z, R=meas.R, h_points=meas.h, u=u)
         else:
-            self.kf.update(z, R=meas.R, hx=lambda x, u: meas.h(x[None, None, :], u[None, :])[0, 0], u=u)
+            meas = self.model.measurement(sensor)
+            h_points = self._sensor_points(meas.h)
+            # filterpy updates with the points of its last predict; a further sensor in the same step
+            # must see points of the state after the previous update (no time passes between them).
+            self.kf.sigmas_f = self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+            if isinstance(self.kf, _PointBatchedUKF):
+                self.kf.update(z, R=meas.R, h_points=h_points, u=u)
+            else:
+                self.kf.update(z, R=meas.R, hx=lambda x, u: h_points(x[None, None, :], u[None, :])[0, 0], u=u)
+        if self.local is not None:
+            self.kf.x = self.local.inject(self.kf.x)
 
     @property
     def mean(self) -> np.ndarray:
-        return self.kf.x
+        return self.kf.x if self.local is None else self.local.state(self.kf.x)
 
     @property
     def covariance(self) -> np.ndarray:

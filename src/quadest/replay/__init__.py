@@ -1,0 +1,6 @@
+"""Replay of real flight logs: a data source other than simulation (docs/replay.md).
+
+:mod:`quadest.replay.ulog` reads a PX4 ULog file, :mod:`quadest.replay.align` puts its samples on
+the filter's time grid. There is no truth in a real log: the filters are compared with PX4's own
+onboard estimate, and the outputs call that the *difference to PX4*.
+"""

@@ -1,0 +1,169 @@
+"""The Monte Carlo data of a log replay: one run, the log's sensors, PX4's estimate as reference.
+
+A replay is one "run" (B = 1) of :class:`~quadest.models.attitude.AttitudeFilterModel` on the
+aligned log (:mod:`quadest.replay.align`), in PX4's frames (body FRD, earth NED):
+
+- input ``u = [ω_m, a_e = 0]``: the gyro; the vehicle's acceleration is unknown (no aiding), so
+  ``R_acc`` carries ``model.acceleration_std²`` on top of the accelerometer's white noise;
+- primary measurement: the accelerometer; further sensor ``"mag"``: the magnetometer in µT
+  (PX4 logs gauss; ×100) at its own samples;
+- gravity ``g_e = [0, 0, g]`` (NED: down) with ``g`` the median norm of the log's accelerometer
+  (a gravity-magnitude calibration: the accelerometer's residual scale error, 9.70 against
+  9.81 m/s² in the shipped log, would otherwise be explained by the z bias alone and tilt the
+  estimate by the scale error times the tilt, 0.07° at the shipped log's 7° of pitch); earth
+  field ``m_e``: the log's median
+  magnetometer vector levelled by the accelerometer's tilt at each magnetometer sample, north
+  component along x (magnetic north; PX4's ``attitude_estimator_q`` uses magnetic heading too
+  when the log has no GPS for the declination). It is a site constant, what a World Magnetic
+  Model lookup gives when the position is known; the log has none, so it comes from the data;
+- noise from the configured sensor (``sensor=consumer`` is the MPU-6000 class of the PX4 board)
+  and the model's magnetometer, process-noise and initial-uncertainty settings, with the same
+  formulas as ``model=attitude`` (:mod:`quadest.models.attitude_data`); the sensor's deterministic
+  errors are not modelled (PX4 applies its own calibration before logging);
+- initial estimate from the first samples alone (roll and pitch from the accelerometer, yaw from
+  the magnetometer; zero biases), never from PX4's estimate;
+- ``truth``: PX4's attitude as a filter state with zero biases (PX4 does not log its bias
+  estimates). It is a *reference*, labelled ``reference: PX4 onboard
+  estimate``; only its attitude is compared (:mod:`quadest.replay.report`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from quadest.config.ranges import require_non_negative
+from quadest.errors import ConfigError
+from quadest.models.attitude import AttitudeFilterModel
+from quadest.models.quadrotor_config import triad_spec
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.data import SensorRecord
+from quadest.montecarlo.streams import run_seed_sequences
+from quadest.numerics import quaternion as quat
+from quadest.replay.align import AlignedLog, align
+from quadest.replay.ulog import read_flight_log
+from quadest.sensors.mimu import TriadSpec
+
+REFERENCE = "PX4 onboard estimate"
+GAUSS_TO_MICROTESLA = 100.0
+_PACKAGE = Path(__file__).resolve().parents[1]
+
+
+def shipped_log() -> Path:
+    """The flight log shipped with quadest: the wheel's copy first, the repository's second."""
+    for candidate in (_PACKAGE / "data" / "px4", _PACKAGE.parents[1] / "data" / "px4"):
+        if (candidate / "sample.ulg").is_file():
+            return candidate / "sample.ulg"
+    raise FileNotFoundError(f"the shipped PX4 log is missing from {_PACKAGE / 'data/px4'}; reinstall quadest")
+
+
+def log_path(cfg) -> Path:
+    """``source.path``, or the shipped log when it is null."""
+    return shipped_log() if cfg.source.path is None else Path(str(cfg.source.path)).expanduser()
+
+
+def validate_replay(cfg) -> None:
+    """Checks of a replay's settings, before any work (called by :func:`quadest.config.validate.validate`)."""
+    if cfg.model.name != "attitude":
+        raise ConfigError("model.name", cfg.model.name, "'attitude' for a log replay (source.name=px4)")
+    if cfg.runs != 1:
+        raise ConfigError("runs", cfg.runs, "1 for a log replay (a log is one run)")
+    if cfg.output.saved_runs < 1:
+        raise ConfigError("output.saved_runs", cfg.output.saved_runs, ">= 1 (a replay compares the saved estimates)")
+    if cfg.source.name != "px4":
+        raise ConfigError("source.name", cfg.source.name, "'px4' (a PX4 ULog file), or source=null to simulate")
+    require_non_negative("source.start", cfg.source.start)
+    require_non_negative("source.warmup", cfg.source.warmup)
+    if not log_path(cfg).is_file():
+        raise ConfigError(
+            "source.path", str(cfg.source.path), "an existing PX4 ULog file (.ulg), or null: the shipped log"
+        )
+
+
+def tilt(accel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Roll and pitch (rad) of a body FRD whose accelerometer reads ``accel`` (..., 3) at rest in
+    NED: ``f = R(q)ᵀ [0, 0, −g]`` gives ``φ = atan2(−f_y, −f_z)``, ``θ = atan2(f_x, √(f_y² + f_z²))``."""
+    roll = np.arctan2(-accel[..., 1], -accel[..., 2])
+    pitch = np.arctan2(accel[..., 0], np.hypot(accel[..., 1], accel[..., 2]))
+    return roll, pitch
+
+
+def _levelled(accel: np.ndarray, mag: np.ndarray) -> np.ndarray:
+    """The magnetometer vectors (..., 3) rotated by the accelerometer's tilt alone (yaw 0)."""
+    roll, pitch = tilt(accel)
+    return quat.rotate(quat.from_euler(np.stack([roll, pitch, np.zeros_like(roll)], axis=-1)), mag)
+
+
+def earth_field(aligned: AlignedLog) -> np.ndarray:
+    """``m_e = [median |m_h|, 0, median m_d]`` (the log's units) over the magnetometer samples,
+    each levelled by the accelerometer's tilt at that step."""
+    ok = aligned.mag_available
+    level = _levelled(aligned.accel[ok], aligned.mag[ok])
+    return np.array([np.median(np.hypot(level[:, 0], level[:, 1])), 0.0, np.median(level[:, 2])])
+
+
+def initial_state(aligned: AlignedLog) -> np.ndarray:
+    """x0 (10,): roll and pitch from the first accelerometer sample, yaw from the first
+    magnetometer sample levelled by them (``ψ = −atan2(m_y, m_x)``), zero biases."""
+    first_mag = int(np.flatnonzero(aligned.mag_available)[0])
+    roll, pitch = tilt(aligned.accel[0])
+    level = _levelled(aligned.accel[0], aligned.mag[first_mag])
+    yaw = -np.arctan2(level[1], level[0])
+    return AttitudeFilterModel.truth_state(np.array([roll, pitch, yaw]), np.zeros(3), np.zeros(3))
+
+
+def replay_noise(
+    cfg, T: float, mag_period: float, duration: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``Q`` (9, 9) per step, ``R_acc``, ``R_mag`` (3, 3) and ``P0`` (9, 9), by the formulas of
+    ``model=attitude`` without aiding (module docstring of :mod:`quadest.models.attitude_data`)."""
+    m, scale = cfg.model, float(cfg.sensor.error_scale)
+    accel, gyro = triad_spec(cfg.sensor.accel, scale), triad_spec(cfg.sensor.gyro, scale)
+    mag = TriadSpec(
+        white_noise=float(m.magnetometer.white_noise), bias_random_walk=float(m.magnetometer.bias_random_walk)
+    )
+    inflation = float(m.attitude_process_noise.inflation)
+    q_att = gyro.white_noise**2 * T + float(m.attitude_process_noise.attitude) ** 2
+    Q = inflation * np.diag([q_att] * 3 + [gyro.bias_random_walk**2 * T] * 3 + [accel.bias_random_walk**2 * T] * 3)
+    noise = float(m.measurement_noise_inflation)
+    R_acc = noise * (accel.white_noise_std(T) ** 2 + float(m.acceleration_std) ** 2) * np.eye(3)
+    R_mag = noise * (mag.white_noise_std(mag_period) ** 2 + mag.bias_random_walk**2 * duration / 2.0) * np.eye(3)
+    s0 = m.attitude_initial_std
+    P0 = np.diag([float(s0.attitude) ** 2] * 3 + [float(s0.gyro_bias) ** 2] * 3 + [float(s0.accel_bias) ** 2] * 3)
+    return Q, R_acc, R_mag, P0
+
+
+def build_replay_data(cfg) -> MonteCarloData:
+    """Read ``source.path``, align it to ``sample_period`` and bind the attitude model to it
+    (``cfg`` validated, :func:`validate_replay` included)."""
+    path = log_path(cfg)
+    log = read_flight_log(path)
+    T = float(cfg.sample_period)
+    aligned = align(log, T, float(cfg.source.start), float(cfg.duration))
+    aligned_uT = dataclasses.replace(aligned, mag=aligned.mag * GAUSS_TO_MICROTESLA)
+    mag_period = float(np.median(np.diff(log.mag_time)))
+    Q, R_acc, R_mag, P0 = replay_noise(cfg, T, mag_period, float(aligned.time[-1] - aligned.time[0]))
+    g_e = np.array([0.0, 0.0, float(np.median(np.linalg.norm(aligned.accel, axis=1)))])
+    model = AttitudeFilterModel(T, g_e, earth_field(aligned_uT), Q, R_acc, R_mag)
+    K1 = aligned.time.size
+    reference = np.concatenate([aligned.reference_q, np.zeros((K1, 6))], axis=-1)  # [q, b_g = 0, b_a = 0]
+    labels = {
+        "model": "attitude", "source": "px4", "log": path.name, "layout": log.layout, "reference": REFERENCE,
+        "warmup": float(cfg.source.warmup), "bridged_gaps": aligned.gaps, "longest_gap": aligned.longest_gap,
+    }  # fmt: skip
+    return MonteCarloData(
+        model=model,
+        time=aligned.time,
+        truth=reference[None],
+        companion_truth=np.zeros((1, K1, 0)),
+        inputs=np.concatenate([aligned.gyro, np.zeros((K1, 3))], axis=-1)[None],
+        measurements=aligned.accel[None],
+        x0=initial_state(aligned_uT)[None],
+        P0=P0,
+        companion0=np.zeros((1, 0)),
+        estimator_seeds=run_seed_sequences(int(cfg.seed), 1)["estimator"],
+        labels=labels,
+        sensors={"mag": SensorRecord(np.nan_to_num(aligned_uT.mag)[None], aligned.mag_available)},
+    )

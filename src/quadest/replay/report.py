@@ -1,0 +1,191 @@
+"""The outputs of a log replay: the difference to the log's reference, where a simulation has errors.
+
+A replay writes the files every job writes (docs/outputs.md), with three differences:
+
+- the compared quantities are PX4's roll, pitch and yaw (ZYX Euler angles, degrees, wrapped to
+  ±180°); ``quantity`` is ``difference to PX4`` and ``rmse`` is the RMS *difference* to the
+  reference over the steps from ``source.warmup`` seconds on (the filters start from the first
+  samples alone, PX4's filter had been running since boot);
+- NEES and the PCRLB are left out (``null``/empty, with a note): both need the true state, and
+  PX4's estimate is not one. NIS stays: it needs only the measurements;
+- one "run": no Monte Carlo spread, so ``rmse_std`` is empty and the paired comparison has no
+  test (fewer than two runs).
+
+Figures: ``figures/attitude_vs_px4.png`` (roll, pitch, yaw of every filter and of PX4 against
+time) and ``figures/difference_to_px4.png`` (the differences, the warm-up shaded).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+from quadest.formatting import markdown_table, strict_json
+from quadest.job_tables import MetricTables, estimator_entries
+from quadest.metrics import estimator_overview, parameter_columns, summarize
+from quadest.models.attitude_figures import attitude_errors_deg
+from quadest.montecarlo import MonteCarloData
+from quadest.numerics import quaternion as quat
+from quadest.paired import paired_comparison, paired_markdown, summary_lines
+from quadest.runner import EstimatorResult
+
+ANGLES = ("roll", "pitch", "yaw")
+QUANTITY = "difference to PX4"
+NOT_APPLICABLE = (
+    "NEES and PCRLB are not reported: they need the true state, and a flight log has none "
+    "(PX4's onboard estimate is a reference, not the truth)."
+)
+
+
+def euler_deg(x: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (..., 3) in degrees of states (..., ≥4) whose first four entries are the
+    body→earth quaternion."""
+    return np.degrees(quat.to_euler(x[..., :4]))
+
+
+def rms_difference(diff: np.ndarray, window: np.ndarray) -> np.ndarray:
+    """RMS over the steps of ``window`` (3,); NaN if any of them is NaN."""
+    return np.sqrt(np.mean(diff[window] ** 2, axis=0))
+
+
+def _table(results, diffs, window, data: MonteCarloData, params, cfg) -> pd.DataFrame:
+    columns = parameter_columns(params)
+    rows = []
+    for res in results:
+        rms = rms_difference(diffs[res.name], window)
+        p = params.get(res.name, {})
+        for j, state in enumerate(ANGLES):
+            row = {
+                "estimator": res.name, "kind": p.get("kind", res.name), "run": 0, "state": state, "unit": "deg",
+                "quantity": QUANTITY, "rmse": rms[j], "diverged": bool(res.diverged[0]),
+                "diverged_step": int(res.diverged_step[0]), "failure_reason": res.reasons.get(0, ""),
+                "mean_nees": np.nan, "mean_nis": float(res.mean_nis[0]), "step_time_us": res.step_time_us,
+            }  # fmt: skip
+            row.update({c: (str(v) if isinstance(v := p.get(c, np.nan), list | tuple | dict) else v) for c in columns})
+            rows.append(row)
+    table = pd.DataFrame(rows)
+    for key, value in {**data.labels, "seed": int(cfg.seed), "runs": 1}.items():
+        table[key] = value
+    return table
+
+
+def _printed(summary: pd.DataFrame) -> pd.DataFrame:
+    """State × estimator, the RMS difference in degrees (``diverged`` where it did)."""
+    text = summary.assign(
+        cell=["diverged" if np.isnan(v) else f"{v:.3f}" for v in summary["rmse_mean"]],
+        row=[f"{s} [{u}]" for s, u in zip(summary["state"], summary["unit"], strict=True)],
+    )
+    wide = text.pivot_table(index="row", columns="estimator", values="cell", aggfunc="first", sort=False)
+    wide.columns.name = None
+    return wide.reset_index().rename(columns={"row": "state"})
+
+
+def caption(data: MonteCarloData) -> str:
+    """The line printed above the table."""
+    lab = data.labels
+    return (
+        f"RMS difference to the {lab['reference']} (vehicle_attitude) of {lab['log']}, degrees, from "
+        f"t = {data.time[0] + lab['warmup']:g} s to {data.time[-1]:.1f} s (one log: no Monte Carlo spread).\n"
+        f"{NOT_APPLICABLE}"
+    )
+
+
+def plot_replay(data: MonteCarloData, angles: dict[str, np.ndarray], reference: np.ndarray, fig_dir: Path) -> None:
+    """``attitude_vs_px4.png`` and ``difference_to_px4.png``."""
+    t, warmup = data.time, data.labels["warmup"]
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    for j, ax in enumerate(axes):
+        ax.plot(t, reference[:, j], color="k", lw=2.2, label="PX4 onboard estimate")
+        for name, a in angles.items():
+            ax.plot(t, a[:, j], lw=1.0, label=name)
+        ax.set_ylabel(f"{ANGLES[j]} [deg]")
+    axes[0].legend(fontsize=8, ncol=len(angles) + 1, loc="upper right")
+    axes[-1].set_xlabel("time since the log's first IMU sample [s]")
+    _save(fig, f"{data.labels['log']}: attitude of our filters and of PX4", fig_dir / "attitude_vs_px4.png")
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    for j, ax in enumerate(axes):
+        for name, a in angles.items():
+            ax.plot(t, (a[:, j] - reference[:, j] + 180.0) % 360.0 - 180.0, lw=1.0, label=name)
+        ax.axvspan(t[0], t[0] + warmup, color="0.85", zorder=0)
+        ax.set_ylabel(f"{ANGLES[j]} diff. [deg]")
+    axes[0].legend(fontsize=8, ncol=len(angles), loc="upper right")
+    axes[-1].set_xlabel("time [s] (shaded: warm-up, not counted)")
+    _save(fig, f"{data.labels['log']}: difference to PX4 (ours − PX4)", fig_dir / "difference_to_px4.png")
+
+
+def _save(fig: plt.Figure, title: str, path: Path) -> None:
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_replay_outputs(
+    cfg,
+    out_dir: Path,
+    data: MonteCarloData,
+    results: list[EstimatorResult],
+    params: dict,
+    header: dict,
+    from_cache: dict[str, bool],
+) -> dict:
+    """Write the job's files for a replay (module docstring) and return the JSON summary;
+    ``header`` holds the job's common summary keys (schema version, commit, overrides, cache)."""
+    reference = data.truth[0]
+    window = data.time >= data.time[0] + data.labels["warmup"]
+    # roll, pitch, yaw of the estimate minus PX4's, wrapped to ±180° (NaN once a run diverged)
+    diffs = {res.name: attitude_errors_deg(res.saved["estimate"][0], reference)[:, 1:] for res in results}
+    table = _table(results, diffs, window, data, params, cfg)
+    summary_table = summarize(table).assign(pooled_rmse=lambda s: s["rmse_mean"], pcrlb=np.nan)
+    with warnings.catch_warnings():  # NaN NEES everywhere, and NIS for filters without innovations
+        warnings.simplefilter("ignore", RuntimeWarning)
+        overview = estimator_overview(results, data.model.n_err, data.model.m)
+    overview = overview.drop(columns=["mean_nees", "nees_dof", "nees_in_band"])
+    table.to_csv(out_dir / "metrics.csv", index=False)
+    summary_table.to_csv(out_dir / "rmse_summary.csv", index=False)
+    printed = _printed(summary_table)
+    paired = paired_comparison(table, int(cfg.seed))
+    paired.to_csv(out_dir / "paired_comparison.csv", index=False)
+    (out_dir / "rmse_table.md").write_text(
+        caption(data) + "\n\n" + markdown_table(printed) + "\n" + markdown_table(overview.round(4))
+        + paired_markdown(paired)
+    )  # fmt: skip
+    ref_angles = euler_deg(reference)
+    angles = {res.name: euler_deg(res.saved["estimate"][0]) for res in results}
+    arrays = {"time": data.time, "reference": reference, "reference_angles_deg": ref_angles}
+    for res in results:
+        arrays[f"{res.name}/estimate"] = res.saved["estimate"]
+        arrays[f"{res.name}/std"] = res.saved["std"]
+        arrays[f"{res.name}/angles_deg"] = angles[res.name]
+    np.savez_compressed(out_dir / "timeseries.npz", **arrays)
+    if cfg.output.figures:
+        fig_dir = out_dir / "figures"
+        fig_dir.mkdir(exist_ok=True)
+        plot_replay(data, angles, ref_angles, fig_dir)
+
+    summary = {
+        **header,
+        "labels": {**data.labels, "seed": int(cfg.seed), "runs": 1, "duration": float(data.time[-1]),
+                   "sample_period": float(cfg.sample_period)},
+        "reference": data.labels["reference"],
+        "compared_from": float(data.labels["warmup"]),
+        "not_applicable": NOT_APPLICABLE,
+        "state_names": list(ANGLES),
+        "companion_names": [],
+        "measurement_names": list(data.model.measurement_names),
+        "estimators": {},
+    }  # fmt: skip
+    tables = MetricTables(table, summary_table, overview, printed, paired)
+    summary["estimators"] = estimator_entries(results, tables, params, from_cache)
+    (out_dir / "summary.json").write_text(strict_json(summary, indent=2))
+    summary["_table"] = printed
+    summary["_paired"] = summary_lines(paired)
+    summary["_caption"] = caption(data)
+    return summary

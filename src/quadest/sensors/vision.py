@@ -1,0 +1,178 @@
+"""Camera on the vehicle observing known beacons (seed 004's VisNav, Junkins et al. 1999 line of
+work): pixel coordinates or bearing angles of each beacon, at the camera's own rate.
+
+Frames: earth z up; body x forward, y left, z up (:mod:`quadest.numerics.quaternion`: ``q`` maps
+body → earth); camera frame of the pinhole convention (Hartley & Zisserman 2004, §6.1): ``z``
+along the optical axis, ``x`` to the image's right, ``y`` down the image. The camera sits at the
+centre of mass (no lever arm). For beacon ``b`` (earth) and vehicle position ``p``:
+
+    r_c = C_cb R(q)ᵀ (b − p)                       (line of sight in the camera frame)
+    pixel:   (u, v) = (c_x + f x_c/z_c, c_y + f y_c/z_c)   (H&Z eq. 6.1, square pixels, no skew)
+    bearing: (α, β) = (atan2(x_c, z_c), atan2(y_c, z_c))    (the two focal-plane angles)
+
+``C_cb`` is the mount: ``forward`` (optical axis along body x) or ``down`` (along body −z, image
+up towards body x), then tilted by ``tilt_deg`` about the camera x axis (positive: the optical
+axis turns towards the image's down direction, i.e. below the horizon for ``forward``).
+
+Error classes: white noise per sample (``pixel_noise`` in px or ``bearing_noise`` in rad, drawn
+under the sensor's :class:`~quadest.sensors.noise_laws.NoiseLaw`), and two per-run errors the
+filters do not know: a mount ``misalignment`` (one-sigma rad per axis, a small rotation of the
+camera frame) and a focal-length ``focal_scale`` error (one-sigma fraction). Draw order from the
+run's ``"vision"`` stream: misalignment (3), focal scale (1), then the noise (K+1, 2N), so a
+change of noise law leaves the per-run errors unchanged.
+
+Availability: a frame exists every ``round(1/(rate T))`` steps (the rate must divide the filter
+rate) and is used only when every beacon is in front of the camera, inside the image and within
+``max_range`` in every run of the batch (the runs differ only by their start point); other frames
+are dropped (the sample is NaN and unavailable), since one sensor record has one availability
+mask for the batch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from quadest.montecarlo.data import SensorRecord
+from quadest.numerics import quaternion as quat
+from quadest.sensors.magnetometer import sample_stride
+from quadest.sensors.noise_laws import NoiseLaw, draw_noise
+
+KINDS = ("pixel", "bearing")
+MOUNTS = ("forward", "down")
+_MOUNT_ROWS = {
+    "forward": np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]),
+    "down": np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]),
+}
+
+
+def _default_beacons() -> list[list[float]]:
+    """Eight beacons on a 3 m × 1.8 m frame 10 m ahead of the start, the middle pair 0.5 m closer
+    (docs/ins.md, "Beacon layout")."""
+    return [
+        [10.0, -1.5, 0.3],
+        [10.0, 0.0, 0.3],
+        [10.0, 1.5, 0.3],
+        [9.5, -1.5, 1.2],
+        [9.5, 1.5, 1.2],
+        [10.0, -1.5, 2.1],
+        [10.0, 0.0, 2.1],
+        [10.0, 1.5, 2.1],
+    ]
+
+
+@dataclass
+class VisionSpec:
+    """The camera, its beacons and its errors; also the config schema of ``sensor.vision``."""
+
+    rate: float = 20.0
+    kind: str = "pixel"
+    pixel_noise: float = 0.5
+    bearing_noise: float = 2.5e-3
+    focal_length: float = 200.0
+    image_size: list[float] = field(default_factory=lambda: [640.0, 480.0])
+    mount: str = "forward"
+    tilt_deg: float = 0.0
+    max_range: float = 30.0
+    misalignment: float = 0.0
+    focal_scale: float = 0.0
+    beacons: list[list[float]] = field(default_factory=_default_beacons)
+    noise_law: NoiseLaw = field(default_factory=NoiseLaw)
+
+    @property
+    def beacon_array(self) -> np.ndarray:
+        return np.asarray(self.beacons, dtype=float).reshape(-1, 3)
+
+    @property
+    def noise_std(self) -> float:
+        """The white-noise standard deviation in the unit of the measurement (px or rad)."""
+        return self.pixel_noise if self.kind == "pixel" else self.bearing_noise
+
+    @property
+    def m(self) -> int:
+        return 2 * self.beacon_array.shape[0]
+
+    def measurement_names(self) -> tuple[str, ...]:
+        a, b = ("u", "v") if self.kind == "pixel" else ("azimuth", "elevation")
+        return tuple(f"beacon{i + 1}_{c}" for i in range(self.beacon_array.shape[0]) for c in (a, b))
+
+
+def mount_rotation(mount: str, tilt_deg: float) -> np.ndarray:
+    """``C_cb`` (3, 3): body → camera, the mount's axes then the tilt about the camera x axis."""
+    t = np.deg2rad(tilt_deg)
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(t), -np.sin(t)], [0.0, np.sin(t), np.cos(t)]])
+    return tilt @ _MOUNT_ROWS[mount]
+
+
+def line_of_sight(q: np.ndarray, p: np.ndarray, beacons: np.ndarray, C_cb: np.ndarray) -> np.ndarray:
+    """``r_c = C_cb R(q)ᵀ (b − p)`` (..., N, 3) for attitudes ``q`` (..., 4), positions ``p`` (..., 3)
+    and beacons (N, 3); ``C_cb`` (3, 3) or per leading index (..., 3, 3)."""
+    r_e = beacons - p[..., None, :]
+    r_b = np.einsum("...ji,...nj->...ni", quat.rotation_matrix(q), r_e)
+    return np.einsum("...ij,...nj->...ni", C_cb, r_b)
+
+
+def project(r_c: np.ndarray, kind: str, focal_length, principal_point) -> np.ndarray:
+    """Measurements (..., 2N) of lines of sight (..., N, 3): pixels ``c + f (x, y)/z`` or bearings
+    ``(atan2(x, z), atan2(y, z))``. ``focal_length`` may carry the leading axes (per run)."""
+    x, y, z = r_c[..., 0], r_c[..., 1], r_c[..., 2]
+    if kind == "pixel":
+        f = np.asarray(focal_length)[..., None] if np.ndim(focal_length) else focal_length
+        out = np.stack([principal_point[0] + f * x / z, principal_point[1] + f * y / z], axis=-1)
+    else:
+        out = np.stack([np.arctan2(x, z), np.arctan2(y, z)], axis=-1)
+    return out.reshape(*out.shape[:-2], -1)
+
+
+def in_view(r_c: np.ndarray, spec: VisionSpec) -> np.ndarray:
+    """Whether each line of sight (..., N, 3) is in front of the camera, inside the image and
+    within ``max_range`` → (..., N) bool."""
+    width, height = spec.image_size
+    x, y, z = r_c[..., 0], r_c[..., 1], r_c[..., 2]
+    ahead = z > 0.0
+    safe_z = np.where(ahead, z, 1.0)
+    inside = (np.abs(x / safe_z) <= 0.5 * width / spec.focal_length) & (
+        np.abs(y / safe_z) <= 0.5 * height / spec.focal_length
+    )
+    return ahead & inside & (np.linalg.norm(r_c, axis=-1) <= spec.max_range)
+
+
+def measure_vision(
+    spec: VisionSpec, q_true: np.ndarray, p_true: np.ndarray, sample_period: float, rngs: list[np.random.Generator]
+) -> SensorRecord:
+    """Camera frames (B, K+1, 2N) of the true attitudes (B, K+1, 4) and positions (B, K+1, 3): the
+    run's per-run errors, then white noise; NaN and unavailable between frames and when a beacon
+    is out of view in some run (module docstring)."""
+    B, K1 = q_true.shape[:2]
+    beacons = spec.beacon_array
+    C_nominal = mount_rotation(spec.mount, spec.tilt_deg)
+    centre = 0.5 * np.asarray(spec.image_size, dtype=float)
+    values = np.empty((B, K1, spec.m))
+    visible = np.ones(K1, dtype=bool)
+    for i, rng in enumerate(rngs):
+        tilt_error = spec.misalignment * rng.standard_normal(3)
+        focal = spec.focal_length * (1.0 + spec.focal_scale * rng.standard_normal())
+        C_true = quat.rotation_matrix(quat.exp(tilt_error)) @ C_nominal
+        r_c = line_of_sight(q_true[i], p_true[i], beacons, C_true)
+        visible &= in_view(r_c, spec).all(axis=-1)
+        values[i] = project(r_c, spec.kind, focal, centre) + draw_noise(
+            spec.noise_law, rng, (K1, spec.m), spec.noise_std
+        )
+    available = (np.arange(K1) % sample_stride(spec.rate, sample_period) == 0) & visible
+    values[:, ~available] = np.nan
+    return SensorRecord(values, available)
+
+
+def projection_jacobian(r_c: np.ndarray, kind: str, focal_length: float) -> np.ndarray:
+    """``∂ project / ∂r_c`` (..., N, 2, 3) at lines of sight (..., N, 3): ``f [[1/z, 0, −x/z²],
+    [0, 1/z, −y/z²]]`` for pixels; for bearings ``∂ atan2(x, z) = (z, 0, −x)/(x² + z²)`` and
+    ``∂ atan2(y, z) = (0, z, −y)/(y² + z²)``."""
+    x, y, z = r_c[..., 0], r_c[..., 1], r_c[..., 2]
+    zero = np.zeros_like(x)
+    if kind == "pixel":
+        rows = [[focal_length / z, zero, -focal_length * x / z**2], [zero, focal_length / z, -focal_length * y / z**2]]
+    else:
+        sx, sy = x**2 + z**2, y**2 + z**2
+        rows = [[z / sx, zero, -x / sx], [zero, z / sy, -y / sy]]
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
