@@ -23,7 +23,9 @@ HISTORICAL = (
     "process",
     "measurement",
 )
-EXPECTED = (*HISTORICAL, "estimator")  # append only
+EXPECTED = (
+    *HISTORICAL, "estimator", "state_sensor", "mag_errors", "mag_noise", "gps", "barometer", "vision",
+)  # fmt: skip  # append only
 
 
 def _reference(seed: int, run: int, name: str) -> np.random.Generator:

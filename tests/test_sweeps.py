@@ -26,7 +26,9 @@ from quadest.aggregate.sweep import expected_jobs
 from quadest.config.schema import register_schemas
 from quadest.config.validate import validate
 from quadest.estimators.registry import resolve
+from quadest.models.quadrotor_config import triad_spec
 from quadest.models.registry import build_data
+from quadest.montecarlo.streams import run_streams
 from quadest.testing import check_sigma_point_moments
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,6 +45,7 @@ duration: 0.3
 workers: 1
 progress: false
 output: {saved_runs: 1, figures: false}
+cache: {enabled: false}  # each launcher computes: the comparison must not read the other's results
 sweep: {alpha: 0.5, beta: 2.0, kappa: 0.0}
 estimator:
   ukf: {alpha: "${sweep.alpha}", beta: "${sweep.beta}", kappa: "${sweep.kappa}"}
@@ -138,8 +141,38 @@ def check_sensor_keys(name: str, cell: dict[str, str], cfg) -> None:
     np.testing.assert_allclose(data.measurements - exact, scale * unit, rtol=1e-9, atol=1e-12 * np.abs(exact).max())
 
 
+def check_contamination_keys(name: str, cell: dict[str, str], cfg) -> None:
+    """``sweep.epsilon`` and ``sweep.variance_factor`` reach both triads' noise laws and the data:
+    the measurements are the Gaussian-law data plus ``σ n (s − 1)``, with the normal draws ``n``
+    and the outlier multipliers ``s`` redrawn here from each run's noise stream (walk increments,
+    then ``n``, then the uniforms that pick the outliers); the filters' R is unchanged."""
+    eps, factor = float(cell["sweep.epsilon"]), float(cell["sweep.variance_factor"])
+    for triad in ("accel", "gyro"):
+        law = cfg.sensor[triad].noise_law
+        assert (law.kind, float(law.epsilon), float(law.variance_factor)) == ("contaminated", eps, factor)
+    data = build_data(cfg)
+    gaussian = cfg.copy()
+    for triad in ("accel", "gyro"):
+        gaussian.sensor[triad].noise_law.kind = "gaussian"
+    base = build_data(gaussian)
+    np.testing.assert_array_equal(data.model.R, base.model.R)
+    T, K1 = float(cfg.sample_period), data.time.size
+    streams = run_streams(int(cfg.seed), int(cfg.runs))
+    expected = base.measurements.copy()
+    for cols, triad in ((slice(0, 3), "accel"), (slice(3, 6), "gyro")):
+        sigma = triad_spec(cfg.sensor[triad], float(cfg.sensor.error_scale)).white_noise_std(T)
+        for i, rng in enumerate(streams[f"{triad}_noise"]):
+            rng.standard_normal((K1, 3))
+            n = rng.standard_normal((K1, 3))
+            s = np.where(rng.random((K1, 3)) < eps, np.sqrt(factor), 1.0)
+            expected[i, :, cols] += sigma * n * (s - 1.0)
+    np.testing.assert_allclose(data.measurements, expected, rtol=1e-12, atol=1e-12, err_msg=f"{name} {cell}")
+
+
 KEY_CHECKS = {
     **dict.fromkeys(UT_KEYS, check_ut_keys),
+    "sweep.epsilon": check_contamination_keys,
+    "sweep.variance_factor": check_contamination_keys,
     "sensor": check_sensor_keys,
     "sensor.error_scale": check_sensor_keys,
 }

@@ -3,7 +3,8 @@
 ``quadest`` runs the default comparison (EKF, UKF and SR-UKF on the thesis quadrotor) and prints
 the per-state RMSE table, one line per estimator, one line per pair of estimators (the paired
 comparison, ``docs/outputs.md``) and the output folder. Any key can be overridden
-(``quadest estimator.srukf.alpha=0.1 sensor=tactical``) or swept (``quadest -m ...``).
+(``quadest estimator.srukf.alpha=0.1 sensor=tactical``) or swept (``quadest -m ...``). Data and
+results computed before are loaded from the result cache (``docs/cache.md``).
 """
 
 from __future__ import annotations
@@ -56,15 +57,19 @@ def _main(cfg: DictConfig) -> float | None:
         _record_failure(out_dir, f"{type(exc).__name__}: {exc}")
         return failed
     print(
-        f"\nPer-state RMSE, mean ± std over {cfg.runs} Monte Carlo runs (per-run RMSE over time; diverged runs "
+        f"\n{summary['_caption']}"  # a flight-log replay (docs/replay.md)
+        if "_caption" in summary
+        else f"\nPer-state RMSE, mean ± std over {cfg.runs} Monte Carlo runs (per-run RMSE over time; diverged runs "
         f"excluded).\n{pcrlb_caption(cfg.model.name)}"
     )
     print(summary["_table"].to_string(index=False))
-    n, m = len(summary["state_names"]), len(summary["measurement_names"])
+    # NEES dof: the error state's (a closed-loop or replay summary has vector states, no error_names)
+    n, m = len(summary.get("error_names", summary["state_names"])), len(summary["measurement_names"])
     for name, est in summary["estimators"].items():
         print(f"  {name:>8s}: {est['diverged']} of {cfg.runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
               f"({n} dof, {_pct(est['nees_in_band'])} of steps in the 95% band), mean NIS {_fmt(est['mean_nis'])} "
-              f"({m} dof, {_pct(est['nis_in_band'])} in band), {_fmt(est['step_time_us'], 1)} us/step/run")  # fmt: skip
+              f"({m} dof, {_pct(est['nis_in_band'])} in band), {_fmt(est['step_time_us'], 1)} us/step/run"
+              f"{' (from the cache)' if est['from_cache'] else ''}")  # fmt: skip
     if summary["_paired"]:
         print("\nPaired differences of per-run RMSE, estimator - reference, in % of the reference with the paired "
               "bootstrap 95% CI\n(paired_comparison.csv; Holm over all pairs x states; runs diverged in either "

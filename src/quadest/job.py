@@ -10,7 +10,6 @@ import multiprocessing
 import os
 import pickle
 import subprocess
-import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
@@ -18,15 +17,26 @@ import numpy as np
 from omegaconf import OmegaConf
 from tqdm.auto import tqdm
 
+from quadest.cache.lookup import JobCache
+from quadest.closed_loop.job import run_closed_loop_job
 from quadest.config.validate import validate
-from quadest.estimators.registry import build_estimator, estimator_parameters
-from quadest.formatting import markdown_table, strict_json
-from quadest.metrics import estimator_overview, floor_table, rmse_table, summarize, tidy_metrics
+from quadest.errors import ConfigError
+from quadest.estimators.registry import build_estimator, estimator_parameters, resolve
+from quadest.formatting import strict_json
+from quadest.job_tables import estimator_entries, write_metric_tables
+from quadest.metrics import convergence_table
 from quadest.models.registry import build_data
 from quadest.montecarlo import MonteCarloData
-from quadest.paired import paired_comparison, paired_markdown, summary_lines
+from quadest.paired import summary_lines
 from quadest.pcrlb import pcrlb_variances
-from quadest.plotting import plot_consistency, plot_errors, plot_rmse_vs_time, plot_truth_vs_estimate
+from quadest.plotting import (
+    plot_consistency,
+    plot_errors,
+    plot_extra_figures,
+    plot_rmse_vs_time,
+    plot_truth_vs_estimate,
+)
+from quadest.replay.report import write_replay_outputs
 from quadest.runner import EstimatorResult, run_estimator
 
 SCHEMA_VERSION = 1
@@ -53,7 +63,7 @@ def failed_result(name: str, data: MonteCarloData, reason: str) -> EstimatorResu
         steps=np.zeros(B), nees_sum=nan, nis_sum=nan.copy(), nees_mean_t=np.full(K1, np.nan),
         nis_mean_t=np.full(K1, np.nan), sq_error_t=np.zeros((K1, n)), alive_t=np.zeros(K1),
         diverged=np.ones(B, dtype=bool), diverged_step=np.zeros(B, dtype=int), reasons=dict.fromkeys(range(B), reason),
-        step_time_us=float("nan"),
+        step_time_us=float("nan"), derived_sq_error_sum=np.full((B, len(data.model.derived_error_names)), np.nan),
         saved={"estimate": np.full((0, K1, n), np.nan), "std": np.full((0, K1, n), np.nan),
                "companion": np.full((0, K1, nc), np.nan)},
     )  # fmt: skip
@@ -79,13 +89,60 @@ def _picklable(data: MonteCarloData) -> bool:
 
 def _run_one(
     label: str, node: dict, data: MonteCarloData, bound: float, saved_runs: int, progress: bool
-) -> EstimatorResult:
-    """Build and run one estimator; any exception becomes a failed result with its text."""
+) -> tuple[EstimatorResult, bool]:
+    """Build and run one estimator; any exception becomes a failed result with its text. The flag
+    says whether the estimator ran to the end (only then is its result worth caching)."""
     try:
         est = build_estimator(label, node, data.model)
-        return run_estimator(label, est, data, bound, saved_runs, progress)
+        return run_estimator(label, est, data, bound, saved_runs, progress), True
     except Exception as exc:  # a broken estimator is recorded, never fatal to the job
-        return failed_result(label, data, f"{type(exc).__name__}: {exc}")
+        return failed_result(label, data, f"{type(exc).__name__}: {exc}"), False
+
+
+def _result_key(cache: JobCache, label: str, node: dict, bound: float, saved_runs: int) -> str | None:
+    try:
+        cls = resolve(label, node)[0]
+    except ConfigError:  # validated already; if it still fails, _run_one records why
+        return None
+    return cache.result_key(label, node, cls, bound, saved_runs)
+
+
+def run_estimators(
+    cfg, data: MonteCarloData, nodes: dict[str, dict], saved_runs: int, cache: JobCache
+) -> tuple[list[EstimatorResult], dict[str, bool]]:
+    """Every estimator's result, in the order of ``nodes``, and whether each came from the cache.
+
+    Only the estimators missing from the cache run (in ``workers`` processes when there are
+    several); each result is stored as soon as it is done. A cached result is the object stored by
+    the run that computed it, its ``step_time_us`` included.
+    """
+    bound = float(cfg.divergence_bound)
+    keys = {label: _result_key(cache, label, node, bound, saved_runs) for label, node in nodes.items()}
+    results = {label: cache.result(keys[label]) for label in nodes}
+    from_cache = {label: result is not None for label, result in results.items()}
+    todo = [label for label in nodes if results[label] is None]
+    workers = resolve_workers(int(cfg.workers), len(todo)) if todo and _picklable(data) else 1
+    tasks = {
+        label: (label, nodes[label], data, bound, saved_runs, bool(cfg.progress) and workers == 1) for label in todo
+    }
+
+    def done(label: str, outcome: tuple[EstimatorResult, bool]) -> None:
+        results[label], ran = outcome
+        if ran:
+            cache.keep(keys[label], results[label])
+
+    if workers == 1:
+        for label, task in tasks.items():
+            done(label, _run_one(*task))
+    else:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(_run_one, *task): label for label, task in tasks.items()}
+            bar = tqdm(total=len(futures), desc="estimators", disable=None if cfg.progress else True, leave=False)
+            for future in as_completed(futures):
+                done(futures[future], future.result())
+                bar.update()
+            bar.close()
+    return [results[label] for label in nodes], from_cache
 
 
 def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
@@ -97,45 +154,29 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     depend on it: each estimator is deterministic given the data).
     """
     validate(cfg)
+    if cfg.loop != "open":  # the controller flies on truth, noisy states or each estimate: docs/closed-loop.md
+        header = {"schema_version": SCHEMA_VERSION, "commit": git_commit()}
+        return run_closed_loop_job(cfg, out_dir, overrides, header, failed_result)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
-    data = build_data(cfg)
+    cache = JobCache.for_job(cfg)
+    data, data_from_cache = cache.data(lambda: build_data(cfg))
     saved_runs = min(int(cfg.output.saved_runs), int(cfg.runs))
     nodes = {label: OmegaConf.to_container(node, resolve=True) for label, node in cfg.estimator.items()}
     params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
-    workers = resolve_workers(int(cfg.workers), len(nodes)) if _picklable(data) else 1
-    tasks = [
-        (label, node, data, float(cfg.divergence_bound), saved_runs, bool(cfg.progress) and workers == 1)
-        for label, node in nodes.items()
-    ]
-    if workers == 1:
-        results = [_run_one(*task) for task in tasks]
-    else:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(_run_one, *task) for task in tasks]
-            bar = tqdm(total=len(futures), desc="estimators", disable=None if cfg.progress else True, leave=False)
-            for _ in as_completed(futures):
-                bar.update()
-            bar.close()
-            results = [f.result() for f in futures]
+    results, from_cache = run_estimators(cfg, data, nodes, saved_runs, cache)
+    if "reference" in data.labels:  # a flight-log replay: differences to a reference, not errors (docs/replay.md)
+        header = {"schema_version": SCHEMA_VERSION, "status": "ok", "commit": git_commit(),
+                  "overrides": list(overrides or []), "cache": {"enabled": bool(cfg.cache.enabled),
+                                                                "data_from_cache": data_from_cache}}  # fmt: skip
+        return write_replay_outputs(cfg, out_dir, data, results, params, header, from_cache)
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        table = tidy_metrics(results, data, params, {"seed": int(cfg.seed), "runs": int(cfg.runs)})
-        bound = pcrlb_variances(data)
-        summary_table = summarize(table).merge(
-            floor_table(results, data, bound), on=["estimator", "quantity", "state"], how="left"
-        )
-        overview = estimator_overview(results, data.model.n_err, data.model.m)
-    table.to_csv(out_dir / "metrics.csv", index=False)
-    summary_table.to_csv(out_dir / "rmse_summary.csv", index=False)
-    printed = rmse_table(summary_table)
-    paired = paired_comparison(table, int(cfg.seed))
-    paired.to_csv(out_dir / "paired_comparison.csv", index=False)
-    (out_dir / "rmse_table.md").write_text(
-        markdown_table(printed) + "\n" + markdown_table(overview.round(4)) + paired_markdown(paired)
-    )
+    bound = cache.derived("pcrlb", lambda: pcrlb_variances(data))
+    labels = {"seed": int(cfg.seed), "runs": int(cfg.runs)}
+    tables = write_metric_tables(out_dir, results, data, params, labels, bound, int(cfg.seed), from_cache)
+    if data.model.bias_states:
+        convergence_table(results, data).to_csv(out_dir / "convergence.csv", index=False)
     if saved_runs:
         arrays = {
             "time": data.time,
@@ -157,6 +198,7 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
             plot_errors(data, ran, fig_dir / "errors_3sigma.png", bound)
             plot_rmse_vs_time(data, results, bound, fig_dir / "rmse_vs_time.png")
             plot_consistency(data, results, fig_dir / "consistency.png")
+            plot_extra_figures(data.model, arrays, fig_dir)
 
     summary = {
         "schema_version": SCHEMA_VERSION,
@@ -166,38 +208,14 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
         "labels": {**data.labels, "seed": int(cfg.seed), "runs": int(cfg.runs),
                    "duration": float(cfg.duration), "sample_period": float(cfg.sample_period)},
         "state_names": list(data.model.state_names),
+        "error_names": list(data.model.error_names),
         "companion_names": list(data.model.companion_names),
         "measurement_names": list(data.model.measurement_names),
+        "cache": {"enabled": bool(cfg.cache.enabled), "data_from_cache": data_from_cache},
         "estimators": {},
     }  # fmt: skip
-    for res, row in zip(results, overview.to_dict("records"), strict=True):
-        rows = summary_table[summary_table["estimator"] == res.name]
-        summary["estimators"][res.name] = {
-            "parameters": params[res.name],
-            "diverged": row["diverged"],
-            "failure_reasons": {str(k): v for k, v in res.reasons.items()},
-            "mean_nees": _json_float(row["mean_nees"]),
-            "nees_in_band": _json_float(row["nees_in_band"]),
-            "mean_nis": _json_float(row["mean_nis"]),
-            "nis_in_band": _json_float(row["nis_in_band"]),
-            "step_time_us": _json_float(row["step_time_us"]),
-            "nis_by_sensor": {
-                sensor: _json_float(np.nanmean(res.mean_sensor_nis(sensor))) if (~res.diverged).any() else None
-                for sensor in res.sensor_nis
-            },
-            "rmse": {
-                r["state"]: {"mean": _json_float(r["rmse_mean"]), "std": _json_float(r["rmse_std"]),
-                             "pooled": _json_float(r["pooled_rmse"]), "pcrlb": _json_float(r["pcrlb"]),
-                             "quantity": r["quantity"], "unit": r["unit"]}
-                for r in rows.to_dict("records")
-            },
-        }  # fmt: skip
+    summary["estimators"] = estimator_entries(results, tables, params, from_cache)
     (out_dir / "summary.json").write_text(strict_json(summary, indent=2))
-    summary["_table"] = printed
-    summary["_paired"] = summary_lines(paired)
+    summary["_table"] = tables.printed
+    summary["_paired"] = summary_lines(tables.paired)
     return summary
-
-
-def _json_float(value) -> float | None:
-    value = float(value)
-    return None if np.isnan(value) else value

@@ -3,6 +3,15 @@
 RMSE convention: for each run and state, ``RMSE = sqrt(mean over steps 1..K of error²)``; the
 summary reports the mean and standard deviation of these per-run values over the runs that did
 not diverge (not the pooled ``sqrt`` of the mean squared error over all runs).
+
+Rows of three quantities: ``filter`` (the error state ``estimate ⊟ truth``, the components the
+NEES uses), ``derived`` (errors of quantities computed from the state that a model declares,
+:meth:`~quadest.models.base.FilterModel.derived_errors`: the attitude models' error angle and
+roll, pitch, yaw errors in degrees) and ``companion`` (values integrated outside the filter).
+
+Bias convergence time (:func:`convergence_table`, for models that declare ``bias_states``): the
+first time after which the RMS over runs of a bias state's error stays below
+:data:`CONVERGENCE_FRACTION` of its prior standard deviation (docs/attitude.md).
 """
 
 from __future__ import annotations
@@ -27,7 +36,7 @@ def tidy_metrics(
     estimator_params: dict[str, dict],
     run_labels: dict,
 ) -> pd.DataFrame:
-    """One row per estimator × run × state (filter states, then companion values)."""
+    """One row per estimator × run × state (filter states, derived errors, companion values)."""
     model = data.model
     columns = parameter_columns(estimator_params)
     frames = []
@@ -36,6 +45,7 @@ def tidy_metrics(
         params = estimator_params.get(res.name, {})
         blocks = [
             ("filter", model.error_names, model.error_units, res.rmse),
+            ("derived", model.derived_error_names, model.derived_error_units, res.derived_rmse),
             ("companion", model.companion_names, model.companion_units, res.companion_rmse),
         ]
         for quantity, names, units, values in blocks:
@@ -152,4 +162,56 @@ def estimator_overview(results: list[EstimatorResult], n: int, m: int) -> pd.Dat
                 "step_time_us": res.step_time_us,
             }
         )
+    return pd.DataFrame(rows)
+
+
+CONVERGENCE_FRACTION = 0.5
+"""A bias has converged once the RMS of its error over the runs stays below this fraction of its
+prior standard deviation (the error halved relative to what the filter started from)."""
+FINAL_FRACTION = 0.1
+"""The last fraction of the steps over which the final RMS of :func:`convergence_table` is taken."""
+
+
+def convergence_time(time: np.ndarray, rms: np.ndarray, threshold: float) -> float:
+    """The first time ``time[k]`` from which ``rms[k:]`` stays below ``threshold``: ``time[0]``
+    if it never exceeds it, NaN if its last value does not lie below (NaN values count as not
+    below: no run alive)."""
+    below = rms < threshold
+    if not below[-1]:
+        return float("nan")
+    above = np.flatnonzero(~below)
+    return float(time[above[-1] + 1] if above.size else time[0])
+
+
+def convergence_table(
+    results: list[EstimatorResult], data: MonteCarloData, fraction: float = CONVERGENCE_FRACTION
+) -> pd.DataFrame:
+    """Per estimator and bias state (``data.model.bias_states``): the prior standard deviation
+    ``sqrt(P0_jj)``, the threshold ``fraction`` × prior σ, the convergence time (s after the
+    start; :func:`convergence_time` of the RMS over the runs alive at each step 1..K, from
+    ``sq_error_t`` and ``alive_t``; NaN when the RMS does not end below the threshold), and the
+    final RMS over the last :data:`FINAL_FRACTION` of the steps, also relative to the prior σ."""
+    model = data.model
+    time = data.time[1:] - data.time[0]
+    tail = slice(-max(1, round(FINAL_FRACTION * time.size)), None)
+    rows = []
+    for res in results:
+        for state in model.bias_states:
+            j = model.error_names.index(state)
+            prior = float(np.sqrt(np.mean(data.P0[..., j, j])))  # per-run P0: the RMS of the prior σ
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rms = np.sqrt(res.sq_error_t[1:, j] / res.alive_t[1:])
+                final = float(np.sqrt(res.sq_error_t[1:][tail, j].sum() / res.alive_t[1:][tail].sum()))
+            rows.append(
+                {
+                    "estimator": res.name,
+                    "state": state,
+                    "unit": model.error_units[j],
+                    "prior_std": prior,
+                    "threshold": fraction * prior,
+                    "convergence_time_s": convergence_time(time, rms, fraction * prior),
+                    "final_rms": final,
+                    "final_over_prior": final / prior,
+                }
+            )
     return pd.DataFrame(rows)

@@ -7,7 +7,9 @@ information of the state obeys
     D11 = E[Fᵀ Q⁻¹ F],  D12 = D21ᵀ = −E[Fᵀ] Q⁻¹,  D22 = Q⁻¹ + E[Hᵀ R⁻¹ H]
 
 with ``F`` the Jacobian of ``f`` at the true ``x_{k−1}`` and ``H`` that of ``h`` at the true
-``x_k``. Expectations are Monte Carlo averages over the runs' true trajectories. Then
+``x_k``. Expectations are Monte Carlo averages over the runs' true trajectories. A further sensor
+(``data.sensors``) adds its ``E[H_sᵀ R_s⁻¹ H_s]`` to ``D22`` at the steps where it has a sample
+(independent measurement noises: the information of sequential updates adds). Then
 ``E[(x̂_k − x_k)(x̂_k − x_k)ᵀ] ⪰ J_k⁻¹`` for any estimator, so ``√diag(J_k⁻¹)`` is a floor on the
 RMSE at each step. It is a floor, not a target.
 
@@ -73,21 +75,26 @@ def pcrlb_variances(data: MonteCarloData, P0: np.ndarray | None = None) -> np.nd
     central differences otherwise; inputs carry the *true* companion values (thesis angles).
     """
     model = data.model
-    K1, n = data.truth.shape[1:]
+    K1, n = data.truth.shape[1], model.n_err
     P0 = data.P0 if P0 is None else P0
-    Qi, Ri = _inverse_noise(model.Q), _inverse_noise(model.R)
+    Qi = _inverse_noise(model.Q)
+    measured = [(None, _inverse_noise(model.R) if model.m else None, np.ones(K1, dtype=bool))]
+    measured += [(name, _inverse_noise(model.measurement(name).R), rec.available) for name, rec in data.sensors.items()]
     J = np.linalg.inv(P0)
     out = np.empty((K1, n))
     out[0] = np.diag(P0)
     u_prev = model.filter_input(data.inputs[:, 0], data.companion_truth[:, 0])
     for k in range(1, K1):
         u_now = model.filter_input(data.inputs[:, k], data.companion_truth[:, k])
-        F = model.F(data.truth[:, k - 1], u_prev)
-        H = model.H(data.truth[:, k], u_now)
+        F = model.F_err(data.truth[:, k - 1], u_prev)  # = F, H for vector states
         Ft = np.swapaxes(F, -1, -2)
         D11 = (Ft @ Qi @ F).mean(axis=0)
         D12 = -Ft.mean(axis=0) @ Qi
-        D22 = Qi + (np.swapaxes(H, -1, -2) @ Ri @ H).mean(axis=0)
+        D22 = Qi.copy()
+        for sensor, Ri, available in measured:
+            if Ri is not None and available[k]:
+                H = model.H_err(data.truth[:, k], u_now, sensor)
+                D22 += (np.swapaxes(H, -1, -2) @ Ri @ H).mean(axis=0)
         J = D22 - D12.T @ np.linalg.solve(J + D11, D12)
         J = 0.5 * (J + J.T)
         out[k] = np.diag(np.linalg.inv(J))

@@ -1,7 +1,9 @@
-"""Figures of one job: truth vs estimate, and estimation error with ±3σ bounds."""
+"""Figures of one job: truth vs estimate, and estimation error with ±3σ bounds; and the figures a
+model declares in ``extra_figures`` (:data:`EXTRA_FIGURES`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import matplotlib
@@ -11,6 +13,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from quadest.consistency import chi2_band
+from quadest.models.attitude_figures import plot_attitude_errors, plot_bias_estimates
+from quadest.models.base import FilterModel
 from quadest.montecarlo import MonteCarloData
 from quadest.pcrlb import pcrlb_is_bound
 from quadest.runner import EstimatorResult
@@ -128,3 +132,23 @@ def plot_consistency(data: MonteCarloData, results: list[EstimatorResult], path:
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
     return _save(fig, f"Consistency over {data.truth.shape[0]} runs", path)
+
+
+def _bias_estimates(model: FilterModel, series: Mapping[str, np.ndarray], path: Path) -> Path:
+    """The model's ``bias_states`` (error-state names that are also state names) against the truth."""
+    states = [model.state_names.index(name) for name in model.bias_states]
+    return plot_bias_estimates(series, path, states, model.bias_states, [model.state_units[i] for i in states])
+
+
+EXTRA_FIGURES: dict[str, Callable[[FilterModel, Mapping[str, np.ndarray], Path], Path]] = {
+    "attitude_errors": lambda model, series, path: plot_attitude_errors(series, path),
+    "bias_estimates": _bias_estimates,
+}
+"""Figures a model can ask for by name in ``extra_figures``: (model, saved series, path) → path.
+The series are those of ``timeseries.npz`` (``time``, ``truth``, ``<estimator>/estimate``,
+``<estimator>/std``)."""
+
+
+def plot_extra_figures(model: FilterModel, series: Mapping[str, np.ndarray], fig_dir: Path) -> list[Path]:
+    """Draw the model's ``extra_figures`` from the saved series into ``fig_dir/<name>.png``."""
+    return [EXTRA_FIGURES[name](model, series, fig_dir / f"{name}.png") for name in model.extra_figures]

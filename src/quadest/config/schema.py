@@ -15,9 +15,14 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from quadest.closed_loop.config import ClosedLoopConf
 from quadest.errors import ConfigError
 from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.sensors.barometer import BarometerSpec
+from quadest.sensors.gps import GPSSpec
 from quadest.sensors.mimu import TriadSpec
+from quadest.sensors.noise_laws import NoiseLaw
+from quadest.sensors.vision import VisionSpec
 
 
 @dataclass
@@ -115,14 +120,24 @@ class EncoderConf:
 
 
 @dataclass
+class TriadConf(TriadSpec):
+    """``sensor.accel`` / ``sensor.gyro``: the error levels and the law of the white noise."""
+
+    noise_law: NoiseLaw = field(default_factory=NoiseLaw)
+
+
+@dataclass
 class SensorConf:
     """``sensor=ideal|tactical|consumer``; ``error_scale`` multiplies every MIMU error term."""
 
     name: str = MISSING
     error_scale: float = 1.0
-    accel: TriadSpec = field(default_factory=TriadSpec)
-    gyro: TriadSpec = field(default_factory=TriadSpec)
+    accel: TriadConf = field(default_factory=TriadConf)
+    gyro: TriadConf = field(default_factory=TriadConf)
     encoder: EncoderConf = field(default_factory=EncoderConf)
+    gps: GPSSpec = field(default_factory=GPSSpec)  # navigation sensors (model=ins): conf/sensor/gps/ ...
+    barometer: BarometerSpec = field(default_factory=BarometerSpec)
+    vision: VisionSpec = field(default_factory=VisionSpec)
 
 
 @dataclass
@@ -146,6 +161,27 @@ class ObjectiveConf:
 
 
 @dataclass
+class CacheConf:
+    """The result cache (:mod:`quadest.cache`, docs/cache.md): ``dir`` null means
+    ``$QUADEST_CACHE_DIR``, else ``~/.cache/quadest``."""
+
+    enabled: bool = True
+    dir: str | None = None
+
+
+@dataclass
+class SourceConf:
+    """``source``: a recorded flight log replayed instead of the simulation (docs/replay.md; null:
+    simulate). ``path`` null is the shipped PX4 log; ``start`` skips seconds of the log;
+    differences to the log's reference count from ``warmup`` seconds after the start."""
+
+    name: str = "px4"
+    path: str | None = None
+    start: float = 0.0
+    warmup: float = 5.0
+
+
+@dataclass
 class ExperimentConf:
     """The root config: Monte Carlo settings plus the four groups."""
 
@@ -163,6 +199,10 @@ class ExperimentConf:
     output: OutputConf = field(default_factory=OutputConf)
     sweep: dict[str, Any] = field(default_factory=dict)  # values a sweep varies and configs interpolate
     objective: ObjectiveConf = field(default_factory=ObjectiveConf)  # set by conf/hparams_search/
+    cache: CacheConf = field(default_factory=CacheConf)
+    loop: str = "open"  # open | truth | measured | estimate: what the controller flies on (docs/closed-loop.md)
+    closed_loop: ClosedLoopConf = field(default_factory=ClosedLoopConf)
+    source: SourceConf | None = None  # a flight log instead of the simulation (conf/experiment/px4_replay.yaml)
 
 
 def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:
@@ -199,6 +239,8 @@ def register_schemas() -> None:
     cs.store(group="schema/model", name="ungm", node=UNGMModelConf)
     cs.store(group="schema/model", name="upf_benchmark", node=UPFBenchmarkModelConf)
     cs.store(group="schema/model", name="seed001_rates", node=Seed001RatesModelConf)
+    cs.store(group="schema/model", name="attitude", node=AttitudeModelConf)
+    cs.store(group="schema/model", name="ins", node=InsModelConf)
     cs.store(group="schema/sensor", name="sensor", node=SensorConf)
     for name, cls in SCENARIOS.items():
         cs.store(group="schema/scenario", name=name, node=cls)
@@ -231,3 +273,93 @@ class Seed001RatesModelConf(QuadrotorModelConf):
     Q: float = 0.1
     R: float = 0.1
     P0: float = 0.1
+
+
+@dataclass
+class MagnetometerConf(TriadSpec):
+    """A magnetometer (:mod:`quadest.sensors.magnetometer`): its rate (Hz, dividing the filter
+    rate), the earth-frame field (µT; default: north 20, down 45 in the z-up frame, inclination
+    66°) and the MIMU's error classes read as soft iron (``scale_factor``, ``cross_coupling``),
+    hard iron (``bias``) and its drift, and white noise (µT/√Hz)."""
+
+    rate: float = 50.0
+    earth_field: list[float] = field(default_factory=lambda: [20.0, 0.0, -45.0])
+    scale_factor: float = 0.02
+    cross_coupling: float = 0.01
+    bias: float = 5.0
+    white_noise: float = 0.03
+
+
+@dataclass
+class AttitudeProcessNoiseConf:
+    """``model=attitude`` process noise: ``attitude`` (rad per step) on top of the gyro's white
+    noise, for model error of the attitude propagation; ``inflation`` multiplies the whole Q."""
+
+    attitude: float = 0.0
+    inflation: float = 1.0
+
+
+@dataclass
+class AttitudeInitialStdConf:
+    """One-sigma of the initial error: attitude (rad per axis), gyro bias (rad/s), accelerometer
+    bias (m/s²); defaults: the consumer MIMU's turn-on biases."""
+
+    attitude: float = 0.05
+    gyro_bias: float = 8.73e-3
+    accel_bias: float = 0.196
+
+
+@dataclass
+class AttitudeModelConf(QuadrotorModelConf):
+    """``model=attitude`` (:mod:`quadest.models.attitude`): quaternion, gyro and accelerometer
+    biases on the shared quadrotor, accelerometer and magnetometer updates (docs/attitude.md).
+    The inherited quadrotor keys fly the truth; its ``process_noise``/``initial_std`` groups belong
+    to the quadrotor filters and are not read here (``attitude_process_noise``/``attitude_initial_std`` are)."""
+
+    name: str = "attitude"
+    known_acceleration: bool = True
+    acceleration_std: float = 1.0
+    magnetometer: MagnetometerConf = field(default_factory=MagnetometerConf)
+    attitude_process_noise: AttitudeProcessNoiseConf = field(default_factory=AttitudeProcessNoiseConf)
+    attitude_initial_std: AttitudeInitialStdConf = field(default_factory=AttitudeInitialStdConf)
+
+
+@dataclass
+class InsProcessNoiseConf:
+    """``model=ins`` process noise: one-sigma terms per step (rad, m, m/s) on top of the IMU's white
+    noise, for what the mechanisation neglects (0: with Δθ/Δv inputs at T = 0.01 s the neglected
+    terms are below the IMU noise, docs/ins.md); ``inflation`` multiplies the whole Q."""
+
+    attitude: float = 0.0
+    position: float = 0.0
+    velocity: float = 0.0
+    inflation: float = 1.0
+
+
+@dataclass
+class InsInitialStdConf:
+    """One-sigma of the initial error: attitude (rad per axis), position (m), velocity (m/s), gyro
+    bias (rad/s), accelerometer bias (m/s²); bias defaults: the consumer MIMU's turn-on biases."""
+
+    attitude: float = 0.05
+    position: float = 0.3
+    velocity: float = 0.1
+    gyro_bias: float = 8.73e-3
+    accel_bias: float = 0.196
+
+
+@dataclass
+class InsModelConf(QuadrotorModelConf):
+    """``model=ins`` (:mod:`quadest.models.ins`, docs/ins.md): strapdown INS with quaternion,
+    position, velocity and both biases, aided by ``aiding`` (in update order; GPS, barometer and
+    camera from ``sensor.gps``/``sensor.barometer``/``sensor.vision``, the magnetometer from
+    ``model.magnetometer``). The inherited quadrotor keys fly the truth; ``process_noise`` and
+    ``initial_std`` belong to the quadrotor filters (``ins_process_noise``/``ins_initial_std`` are
+    read here)."""
+
+    name: str = "ins"
+    attitude_chart: str = "rotation_vector"
+    aiding: list[str] = field(default_factory=lambda: ["gps", "barometer", "vision", "magnetometer"])
+    magnetometer: MagnetometerConf = field(default_factory=MagnetometerConf)
+    ins_process_noise: InsProcessNoiseConf = field(default_factory=InsProcessNoiseConf)
+    ins_initial_std: InsInitialStdConf = field(default_factory=InsInitialStdConf)

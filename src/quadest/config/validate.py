@@ -8,6 +8,7 @@ rejects here.
 
 from __future__ import annotations
 
+from quadest.cache.location import validate_cache
 from quadest.config.ranges import require_non_negative, require_positive
 from quadest.config.schema import check_known_keys
 from quadest.errors import ConfigError
@@ -15,6 +16,8 @@ from quadest.estimators.params import parameter_problem
 from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
 from quadest.models.registry import model_specs, state_dimension
 from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.replay.data import validate_replay
+from quadest.sensors.noise_laws import check_noise_law
 
 
 def validate_run(cfg) -> None:
@@ -51,7 +54,10 @@ def validate_sensor(cfg) -> None:
     )
     for triad in ("accel", "gyro"):
         for key, value in s[triad].items():
-            require_non_negative(f"sensor.{triad}.{key}", value)
+            if key == "noise_law":
+                check_noise_law(f"sensor.{triad}.noise_law", value)
+            else:
+                require_non_negative(f"sensor.{triad}.{key}", value)
         require_positive(
             f"sensor.{triad}.white_noise",
             s[triad].white_noise,
@@ -69,7 +75,7 @@ def validate_scenario(cfg) -> None:
     require_non_negative("scenario.initial_position_std", sc.initial_position_std)
     require_positive("scenario.altitude", sc.altitude)
     require_non_negative("scenario.takeoff_time", sc.takeoff_time)
-    for key in ("period", "spin_up_time", "transition_time"):
+    for key in ("period", "spin_up_time", "transition_time", "approach_time"):
         if key in sc:
             require_positive(f"scenario.{key}", sc[key])
 
@@ -92,4 +98,7 @@ def validate(cfg) -> None:
     check_known_keys(cfg)
     validate_run(cfg)
     validate_model(cfg)
+    if cfg.get("source") is not None:
+        validate_replay(cfg)
     validate_estimators(cfg)
+    validate_cache(cfg)

@@ -18,6 +18,8 @@ Optional capabilities are declared in ``capabilities``, never guessed:
 - ``"cloud"``: the covariance is a summary of a sample (a particle cloud), not the filter's state.
   When it is singular (a cloud collapsed onto one particle) the NEES is unavailable at that step
   and left out of the NEES averages; the run is not taken for diverged.
+- ``"no_covariance"``: the filter has no covariance of the error state (a complementary filter);
+  its ``covariance`` is NaN, its NEES unavailable, and neither makes the run diverged.
 
 An estimator may also report per-run diagnostics at the end of a run (:meth:`Estimator.diagnostics`:
 effective sample size, resampling counts, ...); they become columns of ``metrics.csv``.
@@ -37,7 +39,7 @@ import numpy as np
 from quadest.errors import FilterDivergence
 from quadest.models.base import FilterModel
 
-CAPABILITIES = frozenset({"innovation", "sqrt_covariance", "random", "cloud"})
+CAPABILITIES = frozenset({"innovation", "sqrt_covariance", "random", "cloud", "no_covariance"})
 
 
 class _FailureLog:
@@ -184,7 +186,7 @@ class PerRunAdapter(Estimator):
         self._capabilities = frozenset(getattr(factory, "capabilities", frozenset())) - {"sqrt_covariance"}
         self._reset_failures(model.batch_size)
         self._mean = np.full((model.batch_size, model.n), np.nan)
-        self._cov = np.full((model.batch_size, model.n, model.n), np.nan)
+        self._cov = np.full((model.batch_size, model.n_err, model.n_err), np.nan)
 
     def _each(self, call) -> None:
         for i, filt in enumerate(self.filters):
@@ -193,7 +195,8 @@ class PerRunAdapter(Estimator):
             try:
                 call(i, filt)
                 mean, cov = filt.mean, filt.covariance
-                if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+                known_cov = "no_covariance" not in self._capabilities
+                if not (np.all(np.isfinite(mean)) and (np.all(np.isfinite(cov)) or not known_cov)):
                     raise FilterDivergence("non-finite mean or covariance", [i])
                 self._mean[i], self._cov[i] = mean, cov
             except Exception as exc:  # a plugin's failure marks its run, never the job

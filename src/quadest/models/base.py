@@ -79,6 +79,10 @@ class FilterModel(ABC):
     measurement_names: tuple[str, ...]
     companion_names: tuple[str, ...] = ()
     companion_units: tuple[str, ...] = ()
+    derived_error_names: tuple[str, ...] = ()
+    derived_error_units: tuple[str, ...] = ()
+    bias_states: tuple[str, ...] = ()
+    extra_figures: tuple[str, ...] = ()
     Q: np.ndarray
     R: np.ndarray
     batch_size: int = 1
@@ -178,6 +182,72 @@ class FilterModel(ABC):
         ``residual_x``). Plain subtraction unless a model overrides it."""
         return y - x
 
+    # --- error-state Jacobians (multiplicative / error-state EKF; Solà 2017 §5, §7) ---
+
+    @property
+    def has_manifold_state(self) -> bool:
+        """Whether the state is not a vector (the model overrides :meth:`boxplus`)."""
+        return type(self).boxplus is not FilterModel.boxplus
+
+    def F_err_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray | None:
+        """Analytic error-state transition Jacobian (B, n_err, n_err) at ``x`` (B, n), or ``None``."""
+        return None
+
+    def H_err_analytic(self, x: np.ndarray, u: np.ndarray, sensor: str | None = None) -> np.ndarray | None:
+        """Analytic error-state measurement Jacobian (B, m, n_err) at ``x`` (B, n), or ``None``."""
+        return None
+
+    def F_err(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``∂[f(x ⊞ δ, u) ⊟ f(x, u)]/∂δ`` at ``δ = 0`` (B, n_err, n_err) (Solà 2017 eq. 269's
+        ``F_x``): analytic when the model has it; for vector states :meth:`F`; otherwise central
+        differences on the manifold."""
+        J = self.F_err_analytic(x, u)
+        if J is not None:
+            return J
+        if not self.has_manifold_state:
+            return self.F(x, u)
+        return self.manifold_jacobian_fd(self.f, x, u, state_valued=True)
+
+    def H_err(self, x: np.ndarray, u: np.ndarray, sensor: str | None = None) -> np.ndarray:
+        """``∂h(x ⊞ δ, u)/∂δ`` at ``δ = 0`` (B, m, n_err) of the primary measurement or of
+        ``sensors[sensor]`` (Solà 2017 eq. 279, ``H = H_x X_δx``): analytic when the model has
+        it; for vector states :meth:`measurement_jacobian`; otherwise central differences on the
+        manifold."""
+        J = self.H_err_analytic(x, u, sensor)
+        if J is not None:
+            return J
+        if not self.has_manifold_state:
+            return self.measurement_jacobian(sensor, x, u)
+        return self.manifold_jacobian_fd(self.measurement(sensor).h, x, u, state_valued=False)
+
+    def reset_jacobian(self, x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        """``G = ∂[(x ⊞ (dx + e)) ⊟ (x ⊞ dx)]/∂e`` at ``e = 0`` (B, n_err, n_err): the error state
+        after the correction ``dx`` is injected into the mean, ``P ← G P Gᵀ`` (Solà 2017 §7.2,
+        eqs. 284–287). The identity for vector states; central differences otherwise."""
+        B, ne = dx.shape
+        if not self.has_manifold_state:
+            return np.broadcast_to(np.eye(ne), (B, ne, ne)).copy()
+        E = self.fd_step * np.eye(ne)
+        moved = self.boxplus(x, dx)
+        plus = self.boxplus(np.repeat(x[:, None], ne, axis=1), dx[:, None] + E)
+        minus = self.boxplus(np.repeat(x[:, None], ne, axis=1), dx[:, None] - E)
+        d = self.boxminus(plus, moved[:, None]) - self.boxminus(minus, moved[:, None])
+        return np.swapaxes(d / (2.0 * self.fd_step), -1, -2)
+
+    def manifold_jacobian_fd(self, fun, x: np.ndarray, u: np.ndarray, state_valued: bool) -> np.ndarray:
+        """Central differences of ``fun`` along the error state: points ``x ⊞ (±h e_j)``, and the
+        outputs differenced with :meth:`boxminus` about ``fun(x)`` when ``state_valued`` (``f``),
+        plainly otherwise (``h``). ``h = fd_step`` (the error state is centred at zero)."""
+        ne = self.n_err
+        E = self.fd_step * np.eye(ne)
+        pts = self.boxplus(np.repeat(x[:, None], 2 * ne, axis=1), np.concatenate([E, -E])[None])
+        y = fun(np.concatenate([pts, x[:, None]], axis=1), u)
+        if state_valued:
+            d = self.boxminus(y[:, : 2 * ne], y[:, 2 * ne :])
+        else:
+            d = y[:, : 2 * ne]
+        return np.swapaxes((d[:, :ne] - d[:, ne:]) / (2.0 * self.fd_step), -1, -2)
+
     # --- noise: distributions and the augmented (noise-in-the-state) form ---
 
     @property
@@ -231,6 +301,19 @@ class FilterModel(ABC):
     def companion_step(self, companion: np.ndarray, x_post: np.ndarray) -> np.ndarray:
         """Advance the companion values one sample from the posterior estimate ``x_post`` (B, n)."""
         return companion
+
+    # --- what the job reports besides the error state ---
+
+    def derived_errors(self, estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+        """Errors of quantities derived from the state (``derived_error_names``, in
+        ``derived_error_units``; e.g. roll, pitch, yaw in degrees), ``estimate`` and ``truth``
+        (B, n) → (B, d). The runner accumulates their squares per run like the state errors (rows
+        of quantity ``derived`` in the metrics tables). None unless a model declares them.
+
+        ``bias_states`` names the error states that are sensor biases (the job reports their
+        convergence time, :func:`quadest.metrics.convergence_table`); ``extra_figures`` names
+        figures of :data:`quadest.plotting.EXTRA_FIGURES` the job draws for this model."""
+        return np.zeros((*estimate.shape[:-1], 0))
 
     # --- batches ---
 

@@ -1,5 +1,9 @@
 """Monte Carlo data of ``model=quadrotor``: fly the scenario, measure it with the MIMU and the
-encoders, and bind the filter model to the runs' assumed sensor errors."""
+encoders, and bind the filter model to the runs' assumed sensor errors.
+
+The same pieces serve the closed loop (:mod:`quadest.closed_loop`): :func:`draw_plant` draws every
+random number a :class:`~quadest.quadrotor.plant.QuadrotorPlant` needs from the same streams, and
+:func:`record_quadrotor_data` measures a truth however it was flown."""
 
 from __future__ import annotations
 
@@ -15,12 +19,24 @@ from quadest.models.quadrotor_config import (
     triad_spec,
 )
 from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.data import sample_count
 from quadest.montecarlo.initial import draw_initial_estimates, initial_covariance
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.quadrotor.controller import BacksteppingController
-from quadest.quadrotor.simulate import simulate_truth
+from quadest.quadrotor.plant import PlantDraws
+from quadest.quadrotor.scenarios import Scenario
+from quadest.quadrotor.simulate import TruthTrajectory, simulate_truth
 from quadest.sensors.encoders import encoder_resolution, measure_rotor_speeds
 from quadest.sensors.mimu import TriadErrors, draw_triad_errors, measure_triad
+from quadest.sensors.noise_laws import noise_law_from_config
+
+
+def draw_start(flown: Scenario, streams: dict) -> np.ndarray:
+    """(B, 3) start positions: on the ground, horizontally scattered by the ``"start"`` stream."""
+    start = np.zeros((len(streams["start"]), 3))
+    for i, rng in enumerate(streams["start"]):
+        start[i, :2] = flown.initial_position_std * rng.standard_normal(2)
+    return start
 
 
 def fly_scenario(cfg, streams: dict):
@@ -30,47 +46,90 @@ def fly_scenario(cfg, streams: dict):
     mcfg, T = cfg.model, float(cfg.sample_period)
     params = quadrotor_params(mcfg)
     flown = scenario(cfg.scenario)
-    start = np.zeros((len(streams["start"]), 3))
-    for i, rng in enumerate(streams["start"]):
-        start[i, :2] = flown.initial_position_std * rng.standard_normal(2)
+    start = draw_start(flown, streams)
     controller = BacksteppingController(params, controller_gains(mcfg.controller))
     truth = simulate_truth(params, controller, flown, start, float(cfg.duration), T, int(mcfg.truth_substeps))
     return params, flown, truth
 
 
-def build_quadrotor_data(cfg) -> MonteCarloData:
-    """Fly the scenario for ``cfg.runs`` runs and record what the filters see."""
-    mcfg, scfg = cfg.model, cfg.sensor
-    runs, T, seed = int(cfg.runs), float(cfg.sample_period), int(cfg.seed)
-    streams = run_streams(seed, runs)
-    params, flown, truth = fly_scenario(cfg, streams)
-
-    scale = float(scfg.error_scale)
+def _triads(cfg, streams: dict):
+    """The accelerometer's and gyro's specs, drawn deterministic errors and noise laws."""
+    scfg, scale = cfg.sensor, float(cfg.sensor.error_scale)
     accel, gyro = triad_spec(scfg.accel, scale), triad_spec(scfg.gyro, scale)
-    accel_errors = draw_triad_errors(accel, streams["accel_errors"])
-    gyro_errors = draw_triad_errors(gyro, streams["gyro_errors"])
-    z_acc = measure_triad(accel, accel_errors, truth.specific_force, T, streams["accel_noise"])
-    z_gyro = measure_triad(gyro, gyro_errors, truth.state[..., 9:12], T, streams["gyro_noise"])
-    u = measure_rotor_speeds(
-        truth.state[..., 12:16], int(scfg.encoder.lines), float(scfg.encoder.noise_std), T, streams["encoder"]
+    errors = draw_triad_errors(accel, streams["accel_errors"]), draw_triad_errors(gyro, streams["gyro_errors"])
+    laws = noise_law_from_config(scfg.accel.get("noise_law")), noise_law_from_config(scfg.gyro.get("noise_law"))
+    return (accel, gyro), errors, laws
+
+
+def draw_plant(cfg, streams: dict, flown: Scenario) -> PlantDraws:
+    """Every random number of the runs' plant, from the same streams and in the same order as
+    :func:`build_quadrotor_data` draws them: a triad's drift and noise are what
+    :func:`measure_triad` adds to a zero input through error-free axes, the encoders' noise what
+    :func:`measure_rotor_speeds` adds to zero speeds without quantisation."""
+    runs, T = len(streams["start"]), float(cfg.sample_period)
+    K1 = sample_count(float(cfg.duration), T) + 1
+    (accel, gyro), (accel_errors, gyro_errors), (accel_law, gyro_law) = _triads(cfg, streams)
+    zeros3, nominal = np.zeros((runs, K1, 3)), TriadErrors.nominal(runs)
+    return PlantDraws(
+        start=draw_start(flown, streams),
+        accel_errors=accel_errors,
+        gyro_errors=gyro_errors,
+        accel_noise=measure_triad(accel, nominal, zeros3, T, streams["accel_noise"], accel_law),
+        gyro_noise=measure_triad(gyro, nominal, zeros3, T, streams["gyro_noise"], gyro_law),
+        encoder_noise=measure_rotor_speeds(
+            np.zeros((runs, K1, 4)), 0, float(cfg.sensor.encoder.noise_std), T, streams["encoder"]
+        ),
+        state_noise=np.stack([rng.standard_normal((K1, 12)) for rng in streams["state_sensor"]]),
     )
 
+
+def quadrotor_filter_model(cfg, accel_errors: TriadErrors, gyro_errors: TriadErrors) -> QuadrotorFilterModel:
+    """The filter model of ``cfg.model``, bound to the runs' assumed sensor errors (the drawn
+    ones when ``calibrated``, error-free otherwise)."""
+    mcfg, T, runs = cfg.model, float(cfg.sample_period), accel_errors.bias.shape[0]
+    scale = float(cfg.sensor.error_scale)
+    accel, gyro = triad_spec(cfg.sensor.accel, scale), triad_spec(cfg.sensor.gyro, scale)
     assumed_acc, assumed_gyro = (
         (accel_errors, gyro_errors) if mcfg.calibrated else (TriadErrors.nominal(runs), TriadErrors.nominal(runs))
     )
     state_names = QuadrotorFilterModel.formulation_state_names(mcfg.formulation)
     Q = np.diag(group_diagonal(state_names, mcfg.process_noise) ** 2)
     R = measurement_covariance(accel, gyro, T, float(cfg.duration), float(mcfg.measurement_noise_inflation))
-    model = QuadrotorFilterModel(params, mcfg.formulation, T, Q, R, assumed_acc, assumed_gyro)
+    return QuadrotorFilterModel(quadrotor_params(mcfg), mcfg.formulation, T, Q, R, assumed_acc, assumed_gyro)
 
-    x_true = model.truth_to_state(truth.state)
-    P0 = initial_covariance(group_diagonal(state_names, mcfg.initial_std), float(mcfg.initial_std.correlation))
-    companion_truth = model.truth_to_companion(truth.state)
-    labels = {
+
+def initial_condition(cfg, state_names: tuple[str, ...], x_true0: np.ndarray, streams: dict):
+    """``(x0, P0)``: P0 from ``cfg.model.initial_std`` and each run's x0 ~ N(x_true0, P0) drawn
+    from its ``"initial"`` stream, ``x_true0`` (B, n) the true filter state at sample 0."""
+    std = cfg.model.initial_std
+    P0 = initial_covariance(group_diagonal(state_names, std), float(std.correlation))
+    return draw_initial_estimates(x_true0, P0, streams["initial"]), P0
+
+
+def data_labels(cfg, flown: Scenario) -> dict:
+    """The descriptive columns of a quadrotor job's metrics table."""
+    mcfg, scfg, T = cfg.model, cfg.sensor, float(cfg.sample_period)
+    return {
         "model": mcfg.name, "formulation": mcfg.formulation, "calibrated": bool(mcfg.calibrated),
-        "sensor": scfg.name, "error_scale": scale, "scenario": flown.name,
+        "sensor": scfg.name, "error_scale": float(scfg.error_scale), "scenario": flown.name,
         "encoder_resolution": encoder_resolution(int(scfg.encoder.lines), T) if scfg.encoder.lines else 0.0,
     }  # fmt: skip
+
+
+def record_quadrotor_data(cfg, streams: dict, flown: Scenario, truth: TruthTrajectory) -> MonteCarloData:
+    """What the filters see of ``truth``, however it was flown: MIMU and encoders measured from the
+    runs' streams, the filter model bound to the assumed sensor errors, and the initial estimates."""
+    scfg, T, runs = cfg.sensor, float(cfg.sample_period), len(streams["start"])
+    (accel, gyro), (accel_errors, gyro_errors), (accel_law, gyro_law) = _triads(cfg, streams)
+    z_acc = measure_triad(accel, accel_errors, truth.specific_force, T, streams["accel_noise"], accel_law)
+    z_gyro = measure_triad(gyro, gyro_errors, truth.state[..., 9:12], T, streams["gyro_noise"], gyro_law)
+    u = measure_rotor_speeds(
+        truth.state[..., 12:16], int(scfg.encoder.lines), float(scfg.encoder.noise_std), T, streams["encoder"]
+    )
+    model = quadrotor_filter_model(cfg, accel_errors, gyro_errors)
+    x_true = model.truth_to_state(truth.state)
+    x0, P0 = initial_condition(cfg, model.state_names, x_true[:, 0], streams)
+    companion_truth = model.truth_to_companion(truth.state)
     return MonteCarloData(
         model=model,
         time=truth.time,
@@ -78,9 +137,16 @@ def build_quadrotor_data(cfg) -> MonteCarloData:
         companion_truth=companion_truth,
         inputs=u,
         measurements=np.concatenate([z_acc, z_gyro], axis=-1),
-        x0=draw_initial_estimates(x_true[:, 0], P0, streams["initial"]),
+        x0=x0,
         P0=P0,
         companion0=companion_truth[:, 0].copy(),
-        estimator_seeds=run_seed_sequences(seed, runs)["estimator"],
-        labels=labels,
+        estimator_seeds=run_seed_sequences(int(cfg.seed), runs)["estimator"],
+        labels=data_labels(cfg, flown),
     )
+
+
+def build_quadrotor_data(cfg) -> MonteCarloData:
+    """Fly the scenario for ``cfg.runs`` runs and record what the filters see."""
+    streams = run_streams(int(cfg.seed), int(cfg.runs))
+    _params, flown, truth = fly_scenario(cfg, streams)
+    return record_quadrotor_data(cfg, streams, flown, truth)

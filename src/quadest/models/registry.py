@@ -6,13 +6,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from quadest.config.schema import (
+    AttitudeModelConf,
+    InsModelConf,
     LinearModelConf,
     QuadrotorModelConf,
     Seed001RatesModelConf,
     UNGMModelConf,
     UPFBenchmarkModelConf,
 )
+from quadest.models.attitude_data import build_attitude_data, validate_attitude
 from quadest.models.config_checks import validate_linear, validate_quadrotor, validate_ungm
+from quadest.models.ins_data import build_ins_data, validate_ins
 from quadest.models.quadrotor import QuadrotorFilterModel
 from quadest.models.quadrotor_data import build_quadrotor_data
 from quadest.models.seed001_rates import build_seed001_rates_data, validate_seed001_rates
@@ -50,6 +54,8 @@ def model_specs() -> dict[str, ModelSpec]:
         "seed001_rates": ModelSpec(
             Seed001RatesModelConf, build_seed001_rates_data, lambda cfg: 3, validate_seed001_rates, True
         ),
+        "attitude": ModelSpec(AttitudeModelConf, build_attitude_data, lambda cfg: 9, validate_attitude, True),  # n_err
+        "ins": ModelSpec(InsModelConf, build_ins_data, lambda cfg: 15, validate_ins, True),  # n_err
     }
 
 
@@ -59,5 +65,9 @@ def state_dimension(cfg) -> int:
 
 
 def build_data(cfg) -> MonteCarloData:
-    """Monte Carlo data of the configured model."""
+    """Monte Carlo data of the configured model: simulated, or replayed from ``source`` (a flight log)."""
+    if cfg.get("source") is not None:
+        from quadest.replay.data import build_replay_data  # docs/replay.md
+
+        return build_replay_data(cfg)
     return model_specs()[cfg.model.name].build(cfg)

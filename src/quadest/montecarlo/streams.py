@@ -3,7 +3,9 @@
 Randomness comes only from ``np.random.SeedSequence(seed)``: it spawns one child per run, and
 each run's child spawns one stream per purpose in :data:`STREAMS` (start point, accelerometer
 errors, gyro errors, accelerometer noise, gyro noise, encoder noise, initial estimate, process
-and measurement noise of the validation models, the estimators' own randomness). So every
+and measurement noise of the validation models, the estimators' own randomness, the closed
+loop's state sensor, the magnetometer's errors and noise, the GPS, barometer and camera of the
+navigation sensors). So every
 estimator sees the same draws, run ``i`` is the same whatever the number of runs, and a sweep over
 ``sensor.error_scale`` scales the same standard-normal draws. Stream ``j`` of run ``i`` is
 ``SeedSequence(seed, spawn_key=(i, j))``, so appending a stream changes no existing draw.
@@ -24,6 +26,12 @@ STREAMS = (
     "process",
     "measurement",
     "estimator",
+    "state_sensor",
+    "mag_errors",
+    "mag_noise",
+    "gps",
+    "barometer",
+    "vision",
 )  # append only: existing streams keep their draws
 
 

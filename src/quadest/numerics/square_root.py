@@ -62,6 +62,8 @@ def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
     x = np.moveaxis(x, (-2, -1), (0, 1)) * np.sqrt(abs(nu))
     downdate = nu < 0
     n = L.shape[0]
+    if n == 0:  # an empty factor (a model without a primary measurement) has nothing to change
+        return S.copy()
     scratch = np.empty_like(L[0])
     with np.errstate(invalid="ignore", divide="ignore"):
         for j in range(x.shape[1]):

@@ -7,7 +7,8 @@ Per triad (gyro or accelerometer), for a true input ``y`` (body frame):
 - ``S``: diagonal scale-factor error; ``S±``: scale-factor asymmetry, acting with the sign of
   each axis input; ``M``: zero-diagonal cross-coupling (installation misalignment);
 - ``b0``: constant drift (turn-on bias); ``b(t)``: random drift, a random walk with
-  ``σ_bd = σ_bc √T`` per sample; ``n``: white noise with ``σ_d = σ_c / √T``.
+  ``σ_bd = σ_bc √T`` per sample; ``n``: white noise with ``σ_d = σ_c / √T``, Gaussian unless a
+  :class:`~quadest.sensors.noise_laws.NoiseLaw` says otherwise (the filters keep ``σ_d``).
 
 The deterministic errors (S, S±, M, b0) are drawn once per Monte Carlo run, with the given
 numbers as one-sigma values. ``error_scale`` multiplies every error term.
@@ -18,6 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from quadest.sensors.noise_laws import NoiseLaw, draw_noise
 
 
 @dataclass
@@ -75,6 +78,14 @@ class TriadErrors:
         """``∂ apply / ∂y`` (B, 3, 3) at ``y`` (B, 3): ``I + S + M + diag(S± ⊙ sgn(y))``."""
         return self.matrix + np.einsum("bi,ij->bij", self.asymmetry * np.sign(y.real), np.eye(3))
 
+    def correction(self, raw: np.ndarray) -> np.ndarray:
+        """``C`` (B, K, 3, 3): the inverse of ``I + S + M + diag(S± ⊙ sgn(raw))`` for bias-free
+        samples ``raw`` (B, K, 3), so ``C raw`` undoes the matrix errors. The sign is taken from
+        the sample: where it differs from the input's, the input is near zero and so is the
+        asymmetry term."""
+        M = self.matrix[:, None] + np.einsum("bki,ij->bkij", self.asymmetry[:, None] * np.sign(raw.real), np.eye(3))
+        return np.linalg.inv(M)
+
 
 def draw_triad_errors(spec: TriadSpec, rngs: list[np.random.Generator]) -> TriadErrors:
     """Draw the deterministic errors once per run, one generator per run."""
@@ -95,8 +106,11 @@ def measure_triad(
     y_true: np.ndarray,
     sample_period: float,
     rngs: list[np.random.Generator],
+    noise_law: NoiseLaw | None = None,
 ) -> np.ndarray:
-    """Measured triad (B, K+1, 3): deterministic errors, random-walk drift and white noise."""
+    """Measured triad (B, K+1, 3): deterministic errors, random-walk drift and white noise drawn
+    under ``noise_law`` (default Gaussian)."""
+    law = NoiseLaw() if noise_law is None else noise_law
     B, K1, _ = y_true.shape
     walk = np.empty((B, K1, 3))
     noise = np.empty((B, K1, 3))
@@ -106,5 +120,5 @@ def measure_triad(
         increments = step * rng.standard_normal((K1, 3))
         increments[0] = 0.0
         walk[i] = np.cumsum(increments, axis=0)
-        noise[i] = sigma * rng.standard_normal((K1, 3))
+        noise[i] = draw_noise(law, rng, (K1, 3), sigma)
     return errors.apply(y_true) + walk + noise
