@@ -65,8 +65,8 @@ MUTATIONS = (
     Mutation(
         "errors accumulated after divergence",
         "src/quadest/runner.py",
-        "alive = ~diverged\n",
-        "alive = np.ones_like(diverged)\n",
+        "alive = ~self.diverged\n",
+        "alive = np.ones_like(self.diverged)\n",
         (GAPS + "test_a_run_diverging_midway_counts_only_its_steps_before_divergence",),
     ),
     Mutation(
@@ -79,9 +79,9 @@ MUTATIONS = (
     Mutation(
         "data drawn from a seed that depends on the estimator kind",
         "src/quadest/job.py",
-        "(label, node, data, float(cfg.divergence_bound)",
-        '(label, node, build_data(OmegaConf.merge(cfg, {"seed": int(cfg.seed) + sum(map(ord, '
-        'node.get("kind", label)))})), float(cfg.divergence_bound)',
+        "(label, nodes[label], data, bound, saved_runs",
+        '(label, nodes[label], build_data(OmegaConf.merge(cfg, {"seed": int(cfg.seed) + sum(map(ord, '
+        'nodes[label].get("kind", label)))})), bound, saved_runs',
         (GAPS + "test_estimators_of_every_kind_see_the_same_draws_on_the_linear_model",
          GAPS + "test_estimators_of_every_kind_get_identical_data_on_the_quadrotor"),
     ),
@@ -173,28 +173,28 @@ MUTATIONS = (
     Mutation(
         "runner errors by plain subtraction instead of the model's boxminus",
         "src/quadest/runner.py",
-        "err = model.boxminus(est.mean, data.truth[:, k])",
-        "err = est.mean - data.truth[:, k]",
+        "err = model.boxminus(est.mean, truth)",
+        "err = est.mean - truth",
         (INTERFACES + "test_angle_filter_with_boxplus_equals_the_unwrapped_filter",),
     ),
     Mutation(
         "further sensors never used",
         "src/quadest/runner.py",
-        "            if not sensor.available[k]:",
-        "            if True:",
+        "if rec.available[k]]",
+        "if False]",
         (INTERFACES + "test_several_sensors_at_their_own_rates_equal_sequential_kalman_updates",),
     ),
     Mutation(
         "random estimators seeded from the truth's start stream",
         "src/quadest/runner.py",
-        "est.set_generators([np.random.default_rng(seed) for seed in data.estimator_seeds])",
+        "est.set_generators([np.random.default_rng(seed) for seed in start.estimator_seeds])",
         "est.set_generators([np.random.default_rng(np.random.SeedSequence(i)) for i in range(B)])",
         (INTERFACES + "test_generators_come_from_the_datas_estimator_seeds",),
     ),
     Mutation(
         "a collapsed particle cloud taken for divergence",
         "src/quadest/runner.py",
-        "        if not is_cloud:\n",
+        "        if not self.is_cloud:\n",
         "        if True:\n",
         (INTERFACES + "test_singular_cloud_covariance_makes_nees_unavailable_not_a_divergence",),
     ),
