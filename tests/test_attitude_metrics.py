@@ -160,3 +160,17 @@ def test_attitude_job_reports_degrees_convergence_figures_and_nine_dof(tmp_path)
     assert json.loads((out / "summary.json").read_text())["error_names"][0] == "dtheta_x"
     for name in ("attitude_errors.png", "bias_estimates.png"):
         assert (out / "figures" / name).is_file(), name
+
+
+def test_a_model_without_a_primary_measurement_prints_nis_per_sensor(tmp_path):
+    """model=ins updates only through its sensors: the printed line gives each sensor's NIS and
+    no meaningless "0 dof" NIS of the empty primary measurement."""
+    out = tmp_path / "run"
+    proc = quadest(
+        ["model=ins", "scenario=figure8", "estimator=[ekf]", "runs=2", "duration=0.5", "progress=false",
+         "cache.enabled=false", f"hydra.run.dir={out}"],
+        tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "(15 dof" in proc.stdout and "(0 dof" not in proc.stdout
+    assert "NIS per sensor gps" in proc.stdout and "vision" in proc.stdout
