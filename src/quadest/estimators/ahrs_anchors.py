@@ -33,6 +33,7 @@ and their ``covariance`` is NaN.
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -111,13 +112,13 @@ class _AhrsAnchor(SingleRunEstimator):
     def covariance(self) -> np.ndarray:
         return np.full((self.model.n_err, self.model.n_err), np.nan)
 
+    @abstractmethod
     def _make(self):
         """The ahrs filter object."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _step(self, q: np.ndarray, acc: np.ndarray, mag: np.ndarray | None) -> np.ndarray:
         """One ahrs step from ``q`` with the stored gyro: IMU (``mag`` None) or MARG."""
-        raise NotImplementedError
 
     def _internal_state(self) -> np.ndarray | None:
         """A copy of what the ahrs object changes in a step besides ``q`` (none for Madgwick)."""
