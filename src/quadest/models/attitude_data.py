@@ -31,6 +31,7 @@ from quadest.models.config_checks import validate_quadrotor
 from quadest.models.quadrotor_config import triad_spec
 from quadest.models.quadrotor_data import fly_scenario
 from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.quadrotor.kinematics import rotation
 from quadest.sensors.magnetometer import measure_magnetometer, sample_stride
@@ -129,8 +130,7 @@ def build_attitude_data(cfg) -> MonteCarloData:
 
     s0 = mcfg.attitude_initial_std
     P0 = np.diag([float(s0.attitude) ** 2] * 3 + [float(s0.gyro_bias) ** 2] * 3 + [float(s0.accel_bias) ** 2] * 3)
-    L0 = np.linalg.cholesky(P0)
-    offsets = np.array([L0 @ rng.standard_normal(9) for rng in streams["initial"]])
+    offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 9)), P0, streams["initial"])
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
         "model": mcfg.name, "calibrated": bool(mcfg.calibrated), "known_acceleration": known,

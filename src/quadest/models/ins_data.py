@@ -37,6 +37,7 @@ from quadest.models.quadrotor_config import triad_spec
 from quadest.models.quadrotor_data import fly_scenario
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.data import SensorRecord
+from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.quadrotor.scenarios import PlatformApproach
 from quadest.sensors.barometer import measure_barometer
@@ -207,8 +208,8 @@ def build_ins_data(cfg) -> MonteCarloData:
     s0 = mcfg.ins_initial_std
     groups = ("attitude", "position", "velocity", "gyro_bias", "accel_bias")
     P0 = np.diag(np.repeat([float(s0[k]) ** 2 for k in groups], 3))
-    L0 = np.linalg.cholesky(P0)
-    x0 = model.boxplus(x_true[:, 0], np.array([L0 @ rng.standard_normal(15) for rng in streams["initial"]]))
+    offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 15)), P0, streams["initial"])
+    x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
         "model": mcfg.name, "calibrated": bool(mcfg.calibrated), "sensor": scfg.name, "error_scale": scale,
         "scenario": flown.name, "attitude_chart": mcfg.attitude_chart, "aiding": "+".join(mcfg.aiding),
