@@ -111,9 +111,17 @@ def test_per_run_adapter_hands_each_run_its_generator():
 # --- 2. noise as distributions -----------------------------------------------------------------
 
 
-def test_gaussian_noise_log_density_and_sampling():
+@pytest.mark.parametrize("structure", ["correlated", "diagonal"])
+def test_gaussian_noise_log_density_and_sampling(structure):
+    """Against scipy; a diagonal covariance takes the models' shortcut (no triangular solve, one
+    product per drawn value), whose draws must be the general rule's values exactly (the matrix
+    product's other terms are exact zeros)."""
     rng = np.random.default_rng(0)
     Q, R = random_spd(rng, 3, 0.5), random_spd(rng, 2, 0.2)
+    if structure == "diagonal":
+        Q, R = np.diag([0.3, 2.0, 1e-5]), np.diag([0.1, 7.0])
+    draws = LinearGaussianModel(np.eye(3), np.eye(2, 3), Q, R).sample_process_noise(np.random.default_rng(2), (9,))
+    assert np.array_equal(draws, np.random.default_rng(2).standard_normal((9, 3)) @ np.linalg.cholesky(Q).T)
     model = LinearGaussianModel(np.eye(3), np.eye(2, 3), Q, R)
     w = rng.standard_normal((4, 5, 3))
     assert np.allclose(model.process_noise_logpdf(w), multivariate_normal(np.zeros(3), Q).logpdf(w), atol=1e-12)

@@ -189,19 +189,38 @@ class PerRunAdapter(Estimator):
         self._cov = np.full((model.batch_size, model.n_err, model.n_err), np.nan)
 
     def _each(self, call) -> None:
+        """``call(i, filter)`` for every live run, then collect the means and covariances. A run
+        that raises, or whose mean (or known covariance) is not finite, is flagged and keeps its
+        last finite values; the finiteness check runs once for the batch."""
+        previous = self._mean.copy(), self._cov.copy()
+        stepped = []
         for i, filt in enumerate(self.filters):
             if self.failed[i]:
                 continue
             try:
                 call(i, filt)
-                mean, cov = filt.mean, filt.covariance
-                known_cov = "no_covariance" not in self._capabilities
-                if not (np.all(np.isfinite(mean)) and (np.all(np.isfinite(cov)) or not known_cov)):
-                    raise FilterDivergence("non-finite mean or covariance", [i])
-                self._mean[i], self._cov[i] = mean, cov
+                self._mean[i], self._cov[i] = filt.mean, filt.covariance
+                stepped.append(i)
             except Exception as exc:  # a plugin's failure marks its run, never the job
                 reason = exc.reason if isinstance(exc, FilterDivergence) else f"{type(exc).__name__}: {exc}"
+                self._mean[i], self._cov[i] = previous[0][i], previous[1][i]
                 self.flag(i, reason)
+        runs = np.asarray(stepped, dtype=int)
+        finite = np.isfinite(self._mean[runs]).all(-1)
+        if "no_covariance" not in self._capabilities:
+            finite &= np.isfinite(self._cov[runs]).all((-2, -1))
+        bad = runs[~finite]
+        if bad.size:
+            self._mean[bad], self._cov[bad] = previous[0][bad], previous[1][bad]
+            self.flag(bad, "non-finite mean or covariance")
+
+    def _park_failed_rows(self, rows: np.ndarray) -> np.ndarray:
+        """``rows`` (B, ...) with each failed run's row replaced by the first live run's, so a
+        batched model call on them raises no floating-point warnings (those rows are ignored)."""
+        if self.failed.any():
+            rows = rows.copy()
+            rows[self.failed] = rows[np.argmin(self.failed)]
+        return rows
 
     @property
     def capabilities(self) -> frozenset[str]:  # type: ignore[override]

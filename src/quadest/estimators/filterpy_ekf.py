@@ -127,13 +127,7 @@ class BatchedFilterpyEKF(PerRunAdapter):
     def _points(self) -> np.ndarray | None:
         """The runs' current means, failed runs parked on a live run's mean (their rows are
         ignored; a NaN row would only raise floating-point warnings); ``None`` if none is live."""
-        if self.failed.all():
-            return None
-        x = self._mean
-        if self.failed.any():
-            x = x.copy()
-            x[self.failed] = x[np.argmin(self.failed)]
-        return x
+        return None if self.failed.all() else self._park_failed_rows(self._mean)
 
     def predict(self, u: np.ndarray) -> None:
         x = self._points()

@@ -12,6 +12,13 @@ filterpy an ``hx`` that returns the rows of one precomputed ``h`` call in filter
 The numbers are the same as with per-point calls; ``vectorize_points=False`` gives the plain
 per-point use (the benchmark times both).
 
+:class:`BatchedFilterpyUKF` (``estimator=ukf``) goes one step further, as the EKF baseline does
+(:mod:`quadest.estimators.filterpy_ekf`): still one filterpy UKF per run, but the sigma points of
+every run of the batch pass through ``f`` and through ``h`` in one model call each per step. A
+model call costs about the same for one run's 2n+1 points as for the whole batch (numpy's
+per-call overhead dominates), so this removes most of the model's share of the step
+(``docs/benchmarks.md``).
+
 On a model whose state is not a vector (``model=attitude``, ``model=ins``) the UKF's state is the
 error about a reference point (:mod:`quadest.estimators.local_coordinates`; USQUE, Crassidis &
 Markley 2003): its sigma points are errors, the model functions see ``reference ⊞ error``, and
@@ -27,7 +34,7 @@ from typing import ClassVar
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from quadest.estimators.base import SingleRunEstimator
+from quadest.estimators.base import PerRunAdapter, SingleRunEstimator
 from quadest.estimators.local_coordinates import LocalCoordinates
 from quadest.estimators.params import ranged, unscented_constraints
 from quadest.models.base import FilterModel
@@ -53,15 +60,24 @@ class _PointBatchedUKF(UnscentedKalmanFilter):
     def __init__(self, f_points: Callable, h_points: Callable, **kwargs) -> None:
         super().__init__(**kwargs)
         self.f_points, self.h_points = f_points, h_points
+        self.propagated: np.ndarray | None = None
 
     def compute_process_sigmas(self, dt, fx=None, **fx_args) -> None:
+        """``self.sigmas_f``: the sigma points of (x, P) through ``f``, or ``propagated`` if given
+        (those same points, evaluated by the caller; used once)."""
+        if self.propagated is not None:
+            self.sigmas_f, self.propagated = self.propagated, None
+            return
         sigmas = self.points_fn.sigma_points(self.x, self.P)
         self.sigmas_f = self.f_points(sigmas[None], fx_args["u"][None, :])[0]
 
-    def update(self, z, R=None, UT=None, hx=None, h_points=None, **hx_args) -> None:
-        """``h_points`` (default the primary measurement's) is the vectorised measurement function."""
-        h = self.h_points if h_points is None else h_points
-        rows = iter(h(self.sigmas_f[None], hx_args["u"][None, :])[0])
+    def update(self, z, R=None, UT=None, hx=None, h_points=None, h_values=None, **hx_args) -> None:
+        """``h_points`` (default the primary measurement's) is the vectorised measurement function;
+        ``h_values`` (P, m), if given, are its values at ``self.sigmas_f``, evaluated by the caller."""
+        if h_values is None:
+            h = self.h_points if h_points is None else h_points
+            h_values = h(self.sigmas_f[None], hx_args["u"][None, :])[0]
+        rows = iter(h_values)
         super().update(z, R=R, UT=UT, hx=lambda x, u: next(rows), **hx_args)
 
 
@@ -69,8 +85,6 @@ class FilterpyUKF(SingleRunEstimator):
     """filterpy's UKF on one run of a :class:`FilterModel`."""
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
-    config_name = "ukf"
-    Params = UKFParams
 
     def __init__(
         self,
@@ -122,6 +136,19 @@ class FilterpyUKF(SingleRunEstimator):
         self.kf.predict(u=u)
         self.local.settle()
 
+    def process_points(self) -> np.ndarray:
+        """The sigma points (2n+1, n) the next time update propagates (filterpy's own rule)."""
+        return self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
+
+    def predict_propagated(self, sigmas_f: np.ndarray, u: np.ndarray) -> None:
+        """Time update of a vector state given :meth:`process_points` through ``f`` (2n+1, n)."""
+        self.kf.propagated = sigmas_f
+        self.kf.predict(u=u)
+
+    def update_evaluated(self, z: np.ndarray, h_values: np.ndarray, u: np.ndarray) -> None:
+        """Primary update of a vector state given ``h`` at the prior sigma points ``kf.sigmas_f``."""
+        self.kf.update(z, u=u, h_values=h_values)
+
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
         """Update with the primary measurement or a named sensor (its ``h`` and ``R``)."""
         if sensor is None:
@@ -149,3 +176,54 @@ class FilterpyUKF(SingleRunEstimator):
 
     def innovation(self) -> tuple[np.ndarray, np.ndarray]:
         return self.kf.y, np.linalg.cholesky(self.kf.S)
+
+
+class BatchedFilterpyUKF(PerRunAdapter):
+    """One :class:`FilterpyUKF` per run; on a vector state, the sigma points of all runs go
+    through ``f`` (time update) and ``h`` (primary measurement update) in one model call each.
+    Manifold states and named sensors take the per-run path."""
+
+    batched: ClassVar[bool] = True
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    config_name = "ukf"
+    Params = UKFParams
+
+    def __init__(self, model: FilterModel, alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0) -> None:
+        super().__init__(model, FilterpyUKF, alpha=alpha, beta=beta, kappa=kappa)
+        self._lockstep = not model.has_manifold_state
+
+    def _stack(self, points_of: Callable[[FilterpyUKF], np.ndarray]) -> np.ndarray | None:
+        """``points_of(filter)`` of every live run stacked (B, P, n), failed runs parked on a live
+        run's points; a run whose points cannot be formed (filterpy's Cholesky fails) is flagged."""
+        rows: dict[int, np.ndarray] = {}
+        for i, filt in enumerate(self.filters):
+            if self.failed[i]:
+                continue
+            try:
+                rows[i] = points_of(filt)
+            except Exception as exc:  # a run's failure marks that run, never the batch
+                self.flag(i, f"{type(exc).__name__}: {exc}")
+        if not rows:
+            return None
+        stacked = np.empty((len(self.filters), *next(iter(rows.values())).shape))
+        for i, points in rows.items():
+            stacked[i] = points
+        return self._park_failed_rows(stacked)
+
+    def predict(self, u: np.ndarray) -> None:
+        if not self._lockstep:
+            super().predict(u)
+            return
+        points = self._stack(FilterpyUKF.process_points)
+        if points is not None:
+            fx = self.model.f(points, u)
+            self._each(lambda i, filt: filt.predict_propagated(fx[i], u[i]))
+
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        if not self._lockstep or sensor is not None:
+            super().update(z, u, sensor)
+            return
+        points = self._stack(lambda filt: filt.kf.sigmas_f)
+        if points is not None:
+            hx = self.model.h(points, u)
+            self._each(lambda i, filt: filt.update_evaluated(z[i], hx[i], u[i]))

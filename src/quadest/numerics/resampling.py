@@ -33,7 +33,7 @@ import numpy as np
 from quadest.errors import ConfigError
 
 RESAMPLING_SCHEMES = ("multinomial", "systematic", "stratified", "residual")
-BLOCK_PARTICLES = 1 << 15  # particles resampled at once (256 KiB per float64 temporary)
+BLOCK_PARTICLES = 1 << 14  # particles resampled at once (128 KiB per float64 temporary)
 
 
 def check_scheme(scheme: str, key: str = "resampling") -> None:
@@ -77,24 +77,33 @@ def _select(cumulative: np.ndarray, positions: np.ndarray) -> np.ndarray:
     return np.minimum(out, N - 1).reshape(positions.shape)
 
 
-def _select_in_strata(cumulative: np.ndarray, positions: np.ndarray) -> np.ndarray:
-    """:func:`_select` for positions ``u_i = fl(fl(i + U_i) / N)`` with ``U_i`` in [0, 1)
-    (stratified, systematic), exactly and in linear time for all runs at once.
+def _select_in_strata(cumulative: np.ndarray, uniforms: np.ndarray, systematic: bool) -> np.ndarray:
+    """:func:`_select` for the positions ``u_i = fl(fl(i + U_i) / N)`` with ``U_i = uniforms[:, i]``
+    in [0, 1) (stratified), or ``uniforms[:, 0]`` for every i (systematic), exactly and in linear
+    time for all runs at once.
 
     Such a position lies in its stratum, ``fl(i/N) ≤ u_i ≤ fl((i+1)/N)``, so the positions are sorted
     and, for each cumulative weight ``c_j`` with ``m = ⌊fl(N c_j)⌋``, every ``i ≤ m − 2`` has
     ``u_i < c_j`` (for N < 2⁵²) and no ``i ≥ m + 1`` has (``c_j < (m+1)/N`` exactly, so
-    ``u_i ≥ fl((m+1)/N) ≥ c_j``): ``K_j = #{i : u_i < c_j}`` needs only the comparisons at
-    ``i = m − 1`` and ``i = m``. Then ``#{j : c_j ≤ u_i} = #{j : K_j ≤ i}``, a cumulative count of
-    the ``K_j`` (one ``bincount`` over the batch, each run offset by ``N + 1``)."""
+    ``u_i ≥ fl((m+1)/N) ≥ c_j``): ``K_j = #{i : u_i < c_j} = m − 1 + [u_{m−1} < c_j] + [u_m < c_j]``,
+    read from the positions padded with −∞ in front and +∞ behind (which count the missing
+    ``u_{−1}`` as below and ``u_N`` as not). Then ``#{j : c_j ≤ u_i} = #{j : K_j ≤ i}``, a
+    cumulative count of the ``K_j`` (one ``bincount`` over the batch, each run offset by ``N + 1``)."""
     B, N = cumulative.shape
+    padded = np.empty((B, N + 2))
+    padded[:, 0], padded[:, -1] = -np.inf, np.inf
+    positions = padded[:, 1:-1]
+    np.add(np.arange(N)[None, :], uniforms[:, :1] if systematic else uniforms, out=positions)
+    positions /= N
     run = np.arange(B)[:, None]
-    m = np.floor(cumulative * N).astype(np.intp)  # in [0, N]: 0 ≤ c_j ≤ 1
-    flat_u = positions.ravel()
-    below = np.maximum(m - 1, 0)
-    below += (m >= 1) & (flat_u[np.maximum(m - 1, 0) + N * run] < cumulative)
-    below += (m < N) & (flat_u[np.minimum(m, N - 1) + N * run] < cumulative)
-    below += (N + 1) * run
+    at = (cumulative * N).astype(np.intp)  # m, in [0, N]: 0 ≤ c_j ≤ 1
+    at += (N + 2) * run  # padded u_{m−1}
+    flat = padded.ravel()
+    below = (flat[at] < cumulative).astype(np.intp)
+    at += 1  # padded u_m
+    below += flat[at] < cumulative
+    below += at
+    below -= run + 2  # K_j + (N + 1) b
     counts = np.bincount(below.ravel(), minlength=B * (N + 1)).reshape(B, N + 1)[:, :N]
     return np.minimum(np.cumsum(counts, axis=1), N - 1)
 
@@ -119,16 +128,11 @@ def _residual(weights: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
 
 
 def _resample_block(scheme: str, weights: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
-    N = weights.shape[1]
     if scheme == "residual":
         return _residual(weights, uniforms)
     if scheme == "multinomial":
         return _select(_cumulative(weights), uniforms)
-    if scheme == "stratified":
-        positions = (np.arange(N)[None, :] + uniforms) / N
-    else:
-        positions = (np.arange(N)[None, :] + uniforms[:, :1]) / N
-    return _select_in_strata(_cumulative(weights), positions)
+    return _select_in_strata(_cumulative(weights), uniforms, systematic=scheme == "systematic")
 
 
 def resample_from_uniforms(scheme: str, weights: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
@@ -136,8 +140,10 @@ def resample_from_uniforms(scheme: str, weights: np.ndarray, uniforms: np.ndarra
     in [0, 1) (see the module docstring for which columns each scheme reads).
 
     Runs are resampled independently, in blocks of about :data:`BLOCK_PARTICLES` particles: the
-    temporaries of a block stay in the processor's cache, which on the development machine more than
-    halves the time of 100 runs × 1000 particles against one pass over the whole batch."""
+    temporaries of a block stay in the processor's cache and, at 128 KiB, below glibc's default
+    threshold for serving an allocation by ``mmap`` (a fresh mapping page-faults on first touch).
+    On the development machine that takes the selection for 100 runs × 1000 particles from
+    ≈ 24 ns (one pass) and ≈ 15 ns (blocks of 2¹⁵) to ≈ 8 ns per particle (``docs/benchmarks.md``)."""
     check_scheme(scheme)
     weights = np.asarray(weights, dtype=float)
     uniforms = np.asarray(uniforms, dtype=float)

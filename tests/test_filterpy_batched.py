@@ -1,5 +1,5 @@
-"""The EKF baseline evaluates the model once per step for the whole batch: same numbers as the
-per-run evaluation, run for run, including a run that fails."""
+"""The filterpy baselines evaluate the model once per step for the whole batch: same numbers as the
+per-run evaluation, run for run, including runs that fail."""
 
 from __future__ import annotations
 
@@ -9,21 +9,32 @@ import pytest
 from helpers import compose_config
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF, FilterpyEKF
+from quadest.estimators.filterpy_ukf import BatchedFilterpyUKF, FilterpyUKF
 from quadest.models.registry import build_data
 
+BASELINES = {
+    "ekf": (lambda m: PerRunAdapter(m, FilterpyEKF), BatchedFilterpyEKF),
+    "ukf": (lambda m: PerRunAdapter(m, FilterpyUKF, alpha=1e-3), lambda m: BatchedFilterpyUKF(m, alpha=1e-3)),
+}
 
+
+@pytest.mark.parametrize("baseline", sorted(BASELINES))
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
-def test_batched_model_evaluation_gives_the_per_run_numbers(formulation):
-    """Both adapters run filterpy's EKF per run; only where f, F, h, H are evaluated differs.
-    Elementwise model code gives the same floats for one row or many, so the tolerance is a few
-    ulps (rtol 1e-12) in case BLAS takes another path for a batch of 3x3 products. Run 1 starts
-    from a NaN mean: it must fail in both and leave the other runs untouched."""
+def test_batched_model_evaluation_gives_the_per_run_numbers(formulation, baseline):
+    """Both adapters run one filterpy filter per run; only where the model (f, h and, for the
+    EKF, F, H) is evaluated differs. Elementwise model code gives the same floats for one row or
+    many, so the tolerance is a few ulps (rtol 1e-12) in case BLAS takes another path for a batch
+    of 3x3 products. Run 1 starts from a NaN mean and run 2 (UKF) from a P0 with no Cholesky
+    factor: they must fail in both and leave the other runs untouched."""
     data = build_data(compose_config([f"model.formulation={formulation}", "runs=4", "duration=1.0"]))
     m = data.model
     x0 = data.x0.copy()
     x0[1] = np.nan
     P0 = np.broadcast_to(data.P0, (4, m.n, m.n)).copy()
-    per_run, batched = PerRunAdapter(m, FilterpyEKF), BatchedFilterpyEKF(m)
+    if baseline == "ukf":
+        P0[2, 0, 0] = -1.0
+    make_per_run, make_batched = BASELINES[baseline]
+    per_run, batched = make_per_run(m), make_batched(m)
     assert batched.capabilities == per_run.capabilities == {"innovation"}
     companion = data.companion0
     for est in (per_run, batched):
@@ -40,5 +51,7 @@ def test_batched_model_evaluation_gives_the_per_run_numbers(formulation):
         np.testing.assert_allclose(batched.mean, per_run.mean, rtol=1e-12, atol=0)
         np.testing.assert_allclose(batched.covariance, per_run.covariance, rtol=1e-12, atol=0)
         companion = m.companion_step(companion, np.nan_to_num(per_run.mean))
-    assert per_run.failed.tolist() == batched.failed.tolist() == [False, True, False, False]
-    assert np.isfinite(batched.mean[[0, 2, 3]]).all()
+    expected = [False, True, baseline == "ukf", False]
+    assert per_run.failed.tolist() == batched.failed.tolist() == expected
+    assert per_run.failure_reasons == batched.failure_reasons
+    assert np.isfinite(batched.mean[~np.array(expected)]).all()
