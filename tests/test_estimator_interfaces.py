@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import ClassVar
 
 import numpy as np
@@ -106,6 +107,40 @@ def test_per_run_adapter_hands_each_run_its_generator():
     assert "random" in adapter.capabilities
     run_estimator("single", adapter, data, 1e9)
     assert seen == [np.random.default_rng(s).standard_normal() for s in data.estimator_seeds]
+
+
+def test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raising():
+    """A run filter that returns a NaN mean (no exception) is flagged with the adapter's reason and
+    keeps its last finite mean; the other runs go on; a filter that raises is flagged with its
+    error. One check per batch must give the flags a check per run gave."""
+    data = build_data(compose_config([*LINEAR, "runs=3"]))
+    run_numbers = itertools.count()
+
+    class Single(FilterpyUKF):
+        def __init__(self, model):
+            super().__init__(model)
+            self.run, self.steps = next(run_numbers), 0
+
+        def predict(self, u):
+            super().predict(u)
+            self.steps += 1
+            if self.run == 1 and self.steps == 2:
+                self.kf.x = np.full_like(self.kf.x, np.nan)
+            if self.run == 2 and self.steps == 3:
+                raise ValueError("plugin bug")
+
+    adapter = PerRunAdapter(data.model, Single)
+    adapter.initialize(data.x0, np.broadcast_to(data.P0, (3, *data.P0.shape[-2:])).copy())
+    means = []
+    for k in range(1, 6):
+        adapter.predict(data.inputs[:, k - 1])
+        means.append(adapter.mean.copy())
+    assert adapter.failed.tolist() == [False, True, True]
+    assert adapter.failure_reasons == {1: "non-finite mean or covariance", 2: "ValueError: plugin bug"}
+    assert np.isfinite(adapter.mean).all()
+    np.testing.assert_array_equal(means[-1][1], means[0][1])  # frozen at its mean after step 1
+    np.testing.assert_array_equal(means[-1][2], means[1][2])  # after step 2
+    assert not np.array_equal(means[-1][0], means[1][0])  # run 0 goes on
 
 
 # --- 2. noise as distributions -----------------------------------------------------------------

@@ -198,6 +198,41 @@ MUTATIONS = (
         "        if True:\n",
         (INTERFACES + "test_singular_cloud_covariance_makes_nees_unavailable_not_a_divergence",),
     ),
+    Mutation(
+        "batched filterpy UKF updates every run with run 0's measurement points",
+        "src/quadest/estimators/filterpy_ukf.py",
+        "filt.update_evaluated(z[i], hx[i], u[i])",
+        "filt.update_evaluated(z[i], hx[0], u[i])",
+        ("tests/test_filterpy_batched.py::test_batched_model_evaluation_gives_the_per_run_numbers",),
+    ),
+    Mutation(
+        "per-run adapters keep a run whose mean stopped being finite",
+        "src/quadest/estimators/base.py",
+        "        bad = runs[~finite]\n",
+        "        bad = runs[:0]\n",
+        (INTERFACES + "test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raising",),
+    ),
+    Mutation(
+        "diagonal Gaussian noise drawn with the variance instead of the standard deviation",
+        "src/quadest/models/base.py",
+        "    e *= diagonal\n",
+        "    e *= diagonal**2\n",
+        (INTERFACES + "test_gaussian_noise_log_density_and_sampling",),
+    ),
+    Mutation(
+        "diagonal Gaussian log-density whitened by the variance",
+        "src/quadest/models/base.py",
+        "(e * (1.0 / diagonal)) ** 2",
+        "(e * (1.0 / diagonal**2)) ** 2",
+        (INTERFACES + "test_gaussian_noise_log_density_and_sampling",),
+    ),
+    Mutation(
+        "strata selection counts one position too many",
+        "src/quadest/numerics/resampling.py",
+        "below -= run + 2",
+        "below -= run + 1",
+        ("tests/test_resampling.py::test_strata_selection_follows_the_rule_across_blocks_and_at_the_edges",),
+    ),
 )  # fmt: skip
 
 

@@ -1,13 +1,19 @@
-"""Seed 004's ranking (HHCF > HF > HCKF > EKF) tested on this job (docs/seed004-landing.md).
+"""Seed 004's ranking (HHCF > HF > HCKF > EKF) tested on a job (``experiment=seed004_landing``,
+docs/seed004-landing.md).
 
 Per run, the 3-D position and velocity RMSE (root of the sum of the three axes' mean squares) and
 the attitude error angle's RMSE (``error_angle``), then the job's own paired comparison
 (:func:`quadest.paired.paired_comparison`: paired bootstrap CI, Wilcoxon, Holm over the rows of
-this table) for each step of the ranking. Usage: ``python ranking.py [job dir]`` → ``ranking.md``.
+this table) for each step of the ranking. A step *holds* when its Holm-corrected Wilcoxon p is
+below 0.05 and the better-ranked filter has the smaller RMSE, is *reversed* when p < 0.05 the
+other way, and is *not shown* otherwise.
+
+``python -m quadest.aggregate.ranking JOB_DIR`` writes ``JOB_DIR/ranking.md`` and prints it.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -38,8 +44,9 @@ def grouped_metrics(metrics: pd.DataFrame) -> pd.DataFrame:
     return out[keep[:2] + ["state", "unit", "quantity", "rmse", "diverged"]]
 
 
-def main(job: Path) -> None:
-    metrics = pd.read_csv(job / "metrics.csv")
+def ranking_lines(metrics: pd.DataFrame) -> list[str]:
+    """The Markdown table of every step of :data:`STEPS` whose two estimators are in ``metrics``
+    (a job's ``metrics.csv``), one row per step and grouped state."""
     names = list(dict.fromkeys(metrics["estimator"]))
     table = paired_comparison(grouped_metrics(metrics), seed=int(metrics["seed"].iloc[0]))
     lines = [
@@ -59,9 +66,25 @@ def main(job: Path) -> None:
             verdict = "not shown" if not p < 0.05 else ("yes" if rel < 0 else "no (reversed)")
             claim = f"| {better} > {worse} | {r['state']} | {r['runs']} |"
             lines.append(f"{claim} {rel:+.2f} % [{lo:+.2f}, {hi:+.2f}] | {p:.2g} | {verdict} |")
-    (job / "ranking.md").write_text("\n".join(lines) + "\n")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m quadest.aggregate.ranking",
+        description="Seed 004's ranking (HHCF > HF > HCKF > EKF) tested on a job's paired comparison.",
+    )
+    parser.add_argument("job_dir", type=Path, help="a job's output folder (holds metrics.csv)")
+    args = parser.parse_args(argv)
+    metrics_csv = args.job_dir / "metrics.csv"
+    if not metrics_csv.is_file():
+        print(f"ranking: error: {metrics_csv} does not exist", file=sys.stderr)
+        return 2
+    lines = ranking_lines(pd.read_csv(metrics_csv))
+    (args.job_dir / "ranking.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    return 0
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parent)
+    sys.exit(main())
