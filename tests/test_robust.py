@@ -25,6 +25,7 @@ from quadest.estimators.extended import HuberEKF
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
 from quadest.estimators.huber import HCKF, HHCF
 from quadest.estimators.srukf import SRUKF
+from quadest.models.base import MeasurementModel
 from quadest.models.functional import LinearGaussianModel
 from quadest.models.quadrotor_data import build_quadrotor_data
 from quadest.numerics.huber import HuberSettings, huber_update
@@ -122,6 +123,21 @@ def test_a_filters_huber_update_is_the_m_estimate_and_its_covariance(make):
     delta, P = _rlm(model.R, P0[0], model.C, z[0] - model.C @ x0[0], 1.345)
     assert np.abs(est.mean[0] - x0[0] - delta).max() <= 1e-8 * np.abs(delta).max()
     assert np.abs(est.covariance[0] - P).max() <= 1e-8 * np.abs(P).max()
+    assert est.diagnostics()["huber_robust_fraction"][0] == 1.0
+
+
+@pytest.mark.parametrize("make", ROBUST, ids=["hckf", "hhcf", "srukf", "hf"])
+def test_updates_without_measurement_rows_do_not_count_in_the_huber_fractions(make):
+    """An INS-like model: an empty primary measurement (m = 0) every step, positions as a named
+    sensor. One empty update and one outlying position update: one update measured something,
+    and it was robust, so the robust fraction is 1 (it was 1/2 when empty updates counted)."""
+    cv = _constant_velocity(1)
+    model = LinearGaussianModel(cv.A, np.zeros((0, 4)), cv.Q, np.zeros((0, 0)), dt=cv.dt, batch_size=1)
+    model.sensors = {"position": MeasurementModel(lambda x, u: x[..., :2], cv.R, ("x", "y"))}
+    est = make(model)
+    est.initialize(np.zeros((1, 4)), np.eye(4)[None])
+    est.update(np.zeros((1, 0)), np.zeros((1, 0)))
+    est.update(np.array([[5.0, -0.4]]), np.zeros((1, 0)), sensor="position")
     assert est.diagnostics()["huber_robust_fraction"][0] == 1.0
 
 

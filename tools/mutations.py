@@ -227,6 +227,13 @@ MUTATIONS = (
         (INTERFACES + "test_gaussian_noise_log_density_and_sampling",),
     ),
     Mutation(
+        "Huber fractions counting updates without measurement rows",
+        "src/quadest/numerics/huber.py",
+        "        if rows == 0:\n            return\n",
+        "",
+        ("tests/test_robust.py::test_updates_without_measurement_rows_do_not_count_in_the_huber_fractions",),
+    ),
+    Mutation(
         "strata selection counts one position too many",
         "src/quadest/numerics/resampling.py",
         "below -= run + 2",

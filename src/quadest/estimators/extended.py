@@ -77,7 +77,7 @@ class HuberEKF(BatchedEKFBase):
         self.x = self.model.boxplus(self.x, step.correction)
         self.P = joseph_covariance(self.P, H, meas.R, K)
         self.P[step.robust] = step.factor[step.robust] @ _t(step.factor[step.robust])
-        self._counts.add(step)
+        self._counts.add(step, self._nu.shape[-1])
         self.quarantine(self.x, self.P, self._x_safe, self._P_safe)
 
     def diagnostics(self) -> dict[str, np.ndarray]:

@@ -216,7 +216,7 @@ class SigmaPointFilter(Estimator):
         if step is not None:
             if step.robust.any():
                 self._set_factor(np.flatnonzero(step.robust), step.factor[step.robust])
-            self._huber_counts.add(step)
+            self._huber_counts.add(step, self._nu.shape[-1])
 
     def diagnostics(self) -> dict[str, np.ndarray]:
         """With Huber settings, the IRLS counts per run (:class:`~quadest.numerics.huber.HuberCounts`)."""

@@ -152,7 +152,12 @@ class HuberCounts:
         self.downweighted = np.zeros(batch)
         self.fallback = np.zeros(batch)
 
-    def add(self, step: HuberStep) -> None:
+    def add(self, step: HuberStep, rows: int) -> None:
+        """Count one update with ``rows`` measurement rows. An update without rows (an INS's empty
+        primary measurement, docs/ins.md) has nothing to downweight and is not counted, so the
+        fractions are per update that measured something."""
+        if rows == 0:
+            return
         self.updates += 1
         self.robust += step.robust
         self.iterations += step.iterations
