@@ -14,7 +14,6 @@ each point is the mean over runs with its 95 % Student-t interval; the time is t
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -26,6 +25,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import NullFormatter
 
+from quadest.aggregate.job_cli import read_job_metrics
 from quadest.aggregate.statistics import with_confidence_interval
 
 FIGURE = "rmse_vs_particles.png"
@@ -86,26 +86,22 @@ def plot_particle_count(series: pd.DataFrame, path: Path, title: str = "") -> pl
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m quadest.aggregate.particle_count",
-        description="RMSE against particle count and time per step for a job's particle filters.",
+    job = read_job_metrics(
+        "particle_count", "RMSE against particle count and time per step for a job's particle filters.", argv
     )
-    parser.add_argument("job_dir", type=Path, help="a job's output folder (holds metrics.csv)")
-    args = parser.parse_args(argv)
-    metrics_csv = args.job_dir / "metrics.csv"
-    if not metrics_csv.is_file():
-        print(f"particle_count: error: {metrics_csv} does not exist", file=sys.stderr)
+    if job is None:
         return 2
-    metrics = pd.read_csv(metrics_csv)
+    job_dir, metrics = job
     if "particles" not in metrics.columns:
-        print(f"particle_count: error: {metrics_csv} has no particle filters (no 'particles' column)", file=sys.stderr)
+        print(f"particle_count: error: {job_dir / 'metrics.csv'} has no particle filters (no 'particles' column)",
+              file=sys.stderr)  # fmt: skip
         return 2
     series = particle_count_series(metrics)
-    series.to_csv(args.job_dir / SERIES, index=False)
+    series.to_csv(job_dir / SERIES, index=False)
     runs = int(series["runs"].max())
-    fig = plot_particle_count(series, args.job_dir / "figures" / FIGURE, f"{args.job_dir.name}: {runs} runs")
+    fig = plot_particle_count(series, job_dir / "figures" / FIGURE, f"{job_dir.name}: {runs} runs")
     plt.close(fig)
-    print(f"Wrote {args.job_dir / 'figures' / FIGURE} and {args.job_dir / SERIES}")
+    print(f"Wrote {job_dir / 'figures' / FIGURE} and {job_dir / SERIES}")
     return 0
 
 

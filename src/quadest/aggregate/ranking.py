@@ -13,13 +13,12 @@ other way, and is *not shown* otherwise.
 
 from __future__ import annotations
 
-import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from quadest.aggregate.job_cli import read_job_metrics
 from quadest.paired import paired_comparison
 
 GROUPS = {"position_3d": ("x", "y", "z"), "velocity_3d": ("vx", "vy", "vz")}
@@ -70,18 +69,14 @@ def ranking_lines(metrics: pd.DataFrame) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m quadest.aggregate.ranking",
-        description="Seed 004's ranking (HHCF > HF > HCKF > EKF) tested on a job's paired comparison.",
+    job = read_job_metrics(
+        "ranking", "Seed 004's ranking (HHCF > HF > HCKF > EKF) tested on a job's paired comparison.", argv
     )
-    parser.add_argument("job_dir", type=Path, help="a job's output folder (holds metrics.csv)")
-    args = parser.parse_args(argv)
-    metrics_csv = args.job_dir / "metrics.csv"
-    if not metrics_csv.is_file():
-        print(f"ranking: error: {metrics_csv} does not exist", file=sys.stderr)
+    if job is None:
         return 2
-    lines = ranking_lines(pd.read_csv(metrics_csv))
-    (args.job_dir / "ranking.md").write_text("\n".join(lines) + "\n")
+    job_dir, metrics = job
+    lines = ranking_lines(metrics)
+    (job_dir / "ranking.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0
 
