@@ -12,18 +12,26 @@ Everything is measured in the same run, on the same data (``experiment=ungm_tool
 3. the wall time of the runner on the full experiment (100 runs × 1000 particles × 500 steps),
    the issue's "under 60 s" target.
 
-The ``particles`` library (Chopin) pins numpy < 2 and must never enter quadest's dependencies;
-its bootstrap filter is benchmarked only when it is importable here, which it is not in the
-project's environment: the script then prints a note and skips it.
+4. the ``particles`` library's bootstrap filter (Chopin; ``particles_ungm.py``) on the same
+   measurements, per run, stratified resampling every step. ``particles`` 0.4 pins numpy < 2 and
+   must never enter quadest's dependencies, so it runs in a separate environment whose Python is
+   given by ``--particles-python`` (or ``QUADEST_PARTICLES_PYTHON``)::
+
+       python -m venv /tmp/particles-env && /tmp/particles-env/bin/pip install particles==0.4
+       python benchmarks/bench_particle.py --particles-python /tmp/particles-env/bin/python
+
+   Without it the script prints a note and skips this column.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import os
+import subprocess
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 from filterpy.monte_carlo import stratified_resample
@@ -93,27 +101,52 @@ def time_full_experiment(data) -> float:
     return time.perf_counter() - start
 
 
+def time_particles_library(python: str, data, steps: int) -> dict:
+    """Run ``particles_ungm.py`` with ``python`` on the first ``steps`` measurements of every run."""
+    with tempfile.TemporaryDirectory() as tmp:
+        measurements = Path(tmp) / "measurements.npy"
+        np.save(measurements, data.measurements[:, 1 : steps + 1, 0])
+        script = Path(__file__).with_name("particles_ungm.py")
+        out = subprocess.run(
+            [python, str(script), str(measurements), str(PARTICLES)], capture_output=True, text=True, check=True
+        )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print a JSON summary as the last line")
     parser.add_argument("--steps", type=int, default=50, help="steps timed for the batched filter")
     parser.add_argument("--loop-steps", type=int, default=10, help="steps timed for the filterpy loop")
+    parser.add_argument(
+        "--particles-python",
+        default=os.environ.get("QUADEST_PARTICLES_PYTHON"),
+        help="Python of a separate environment with particles 0.4 installed (default: $QUADEST_PARTICLES_PYTHON)",
+    )
     args = parser.parse_args()
     load_before = os.getloadavg()[0]
     data = ungm_data(100)
     batched = time_batched(data, args.steps)
     loop = time_filterpy_loop(data, args.loop_steps)
     full = time_full_experiment(data)
+    library = time_particles_library(args.particles_python, data, args.steps) if args.particles_python else None
     print(f"pf, 100 runs x {PARTICLES} particles: {batched:.1f} ns per particle per step")
     print(f"per-run loop with filterpy.stratified_resample: {loop:.1f} ns per particle per step")
     print(f"speed-up: {loop / batched:.1f}x")
     print(f"runner, ungm_toolbox with pf (100 runs x {PARTICLES} particles x 500 steps): {full:.1f} s")
     load = (load_before, os.getloadavg()[0])
     print(f"1-minute load average before / after: {load[0]:.1f} / {load[1]:.1f} on {os.cpu_count()} cores")
-    if importlib.util.find_spec("particles") is None:
-        print("particles library: not installed here (particles 0.4 pins numpy < 2, not a quadest dependency); skipped")
+    if library is None:
+        print(
+            "particles library: skipped (particles 0.4 pins numpy < 2, so it is not a quadest dependency; "
+            "give --particles-python, see this script's docstring)"
+        )
     else:
-        print("particles library: importable, but this script does not compare it; skipped")
+        print(
+            f"particles {library['particles_version']} bootstrap filter (numpy {library['numpy_version']}, separate "
+            f"environment, per run): {library['ns_per_particle_step']:.1f} ns per particle per step; "
+            f"pf is {library['ns_per_particle_step'] / batched:.1f}x faster"
+        )
     if args.json:
         summary = {
             "pf_ns_per_particle_step": round(batched, 2),
@@ -121,6 +154,7 @@ def main() -> None:
             "speedup": round(loop / batched, 1),
             "ungm_toolbox_pf_s": round(full, 1),
             "load_average": [round(v, 2) for v in load],
+            "particles_library_ns_per_particle_step": library and round(library["ns_per_particle_step"], 2),
         }
         print(json.dumps(summary))
 
