@@ -110,10 +110,10 @@ def test_per_run_adapter_hands_each_run_its_generator():
 
 
 def test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raising():
-    """A run filter that returns a NaN mean (no exception) is flagged with the adapter's reason and
-    keeps its last finite mean; the other runs go on; a filter that raises is flagged with its
-    error. One check per batch must give the flags a check per run gave."""
-    data = build_data(compose_config([*LINEAR, "runs=3"]))
+    """A run filter that returns a NaN mean or an infinite covariance (no exception) is flagged with
+    the adapter's reason and keeps its last finite values; the other runs go on; a filter that
+    raises is flagged with its error. One check per batch must give the flags a check per run gave."""
+    data = build_data(compose_config([*LINEAR, "runs=4"]))
     run_numbers = itertools.count()
 
     class Single(FilterpyUKF):
@@ -128,18 +128,23 @@ def test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raisi
                 self.kf.x = np.full_like(self.kf.x, np.nan)
             if self.run == 2 and self.steps == 3:
                 raise ValueError("plugin bug")
+            if self.run == 3 and self.steps == 2:
+                self.kf.P = np.full_like(self.kf.P, np.inf)
 
     adapter = PerRunAdapter(data.model, Single)
-    adapter.initialize(data.x0, np.broadcast_to(data.P0, (3, *data.P0.shape[-2:])).copy())
+    adapter.initialize(data.x0, np.broadcast_to(data.P0, (4, *data.P0.shape[-2:])).copy())
     means = []
     for k in range(1, 6):
         adapter.predict(data.inputs[:, k - 1])
         means.append(adapter.mean.copy())
-    assert adapter.failed.tolist() == [False, True, True]
-    assert adapter.failure_reasons == {1: "non-finite mean or covariance", 2: "ValueError: plugin bug"}
-    assert np.isfinite(adapter.mean).all()
+    assert adapter.failed.tolist() == [False, True, True, True]
+    assert adapter.failure_reasons == {
+        1: "non-finite mean or covariance", 2: "ValueError: plugin bug", 3: "non-finite mean or covariance"
+    }
+    assert np.isfinite(adapter.mean).all() and np.isfinite(adapter.covariance).all()
     np.testing.assert_array_equal(means[-1][1], means[0][1])  # frozen at its mean after step 1
     np.testing.assert_array_equal(means[-1][2], means[1][2])  # after step 2
+    np.testing.assert_array_equal(means[-1][3], means[0][3])  # its covariance failed at step 2
     assert not np.array_equal(means[-1][0], means[1][0])  # run 0 goes on
 
 
@@ -148,20 +153,30 @@ def test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raisi
 
 @pytest.mark.parametrize("structure", ["correlated", "diagonal"])
 def test_gaussian_noise_log_density_and_sampling(structure):
-    """Against scipy; a diagonal covariance takes the models' shortcut (no triangular solve, one
-    product per drawn value), whose draws must be the general rule's values exactly (the matrix
-    product's other terms are exact zeros)."""
+    """Against scipy (its eigendecomposition route agrees to round-off: rtol 1e-10) and against the
+    Cholesky-and-solve rule written out here (a few ulps: rtol 1e-14). A diagonal covariance takes
+    the models' shortcut (no solve, one product per drawn value), whose draws must be the general
+    rule's values exactly (the matrix product's other terms are exact zeros); a semi-definite
+    diagonal still has no density (Cholesky raises, as for any singular covariance)."""
     rng = np.random.default_rng(0)
     Q, R = random_spd(rng, 3, 0.5), random_spd(rng, 2, 0.2)
     if structure == "diagonal":
         Q, R = np.diag([0.3, 2.0, 1e-5]), np.diag([0.1, 7.0])
+        with pytest.raises(np.linalg.LinAlgError):
+            LinearGaussianModel(np.eye(2), np.eye(2), np.diag([1.0, 0.0]), R).process_noise_logpdf(np.ones((1, 2)))
     draws = LinearGaussianModel(np.eye(3), np.eye(2, 3), Q, R).sample_process_noise(np.random.default_rng(2), (9,))
     assert np.array_equal(draws, np.random.default_rng(2).standard_normal((9, 3)) @ np.linalg.cholesky(Q).T)
     model = LinearGaussianModel(np.eye(3), np.eye(2, 3), Q, R)
     w = rng.standard_normal((4, 5, 3))
-    assert np.allclose(model.process_noise_logpdf(w), multivariate_normal(np.zeros(3), Q).logpdf(w), atol=1e-12)
+    L = np.linalg.cholesky(Q)
+    white = np.linalg.solve(L, w.reshape(-1, 3).T).T.reshape(w.shape)
+    written_out = -0.5 * np.sum(white**2, axis=-1) - 1.5 * np.log(2 * np.pi) - np.sum(np.log(np.diag(L)))
+    np.testing.assert_allclose(model.process_noise_logpdf(w), written_out, rtol=1e-14)
+    np.testing.assert_allclose(model.process_noise_logpdf(w), multivariate_normal(np.zeros(3), Q).logpdf(w), rtol=1e-10)
     v = rng.standard_normal((7, 2))
-    assert np.allclose(model.measurement_noise_logpdf(v), multivariate_normal(np.zeros(2), R).logpdf(v), atol=1e-12)
+    np.testing.assert_allclose(
+        model.measurement_noise_logpdf(v), multivariate_normal(np.zeros(2), R).logpdf(v), rtol=1e-10
+    )
     N = 40_000
     draws = model.sample_process_noise(np.random.default_rng(1), (N,))
     # Each sample-covariance entry has standard deviation √((Q_ii Q_jj + Q_ij²)/N): allow 5 of them.

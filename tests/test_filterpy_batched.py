@@ -22,10 +22,10 @@ BASELINES = {
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
 def test_batched_model_evaluation_gives_the_per_run_numbers(formulation, baseline):
     """Both adapters run one filterpy filter per run; only where the model (f, h and, for the
-    EKF, F, H) is evaluated differs. Elementwise model code gives the same floats for one row or
-    many, so the tolerance is a few ulps (rtol 1e-12) in case BLAS takes another path for a batch
-    of 3x3 products. Run 1 starts from a NaN mean and run 2 (UKF) from a P0 with no Cholesky
-    factor: they must fail in both and leave the other runs untouched."""
+    EKF, F, H) is evaluated differs, and the model gives the same floats for one run's rows as for
+    the batch's, so the numbers are bit-identical (exact equality). Run 1 starts from a NaN mean
+    and run 2 (UKF) from a P0 with no Cholesky factor: they must fail in both and leave the other
+    runs untouched."""
     data = build_data(compose_config([f"model.formulation={formulation}", "runs=4", "duration=1.0"]))
     m = data.model
     x0 = data.x0.copy()
@@ -47,9 +47,9 @@ def test_batched_model_evaluation_gives_the_per_run_numbers(formulation, baselin
         for est in (per_run, batched):
             est.update(data.measurements[:, k], u_now)
         for a, b in zip(per_run.innovation(), batched.innovation(), strict=True):
-            np.testing.assert_allclose(b, a, rtol=1e-12, atol=0)
-        np.testing.assert_allclose(batched.mean, per_run.mean, rtol=1e-12, atol=0)
-        np.testing.assert_allclose(batched.covariance, per_run.covariance, rtol=1e-12, atol=0)
+            np.testing.assert_array_equal(b, a)
+        np.testing.assert_array_equal(batched.mean, per_run.mean)
+        np.testing.assert_array_equal(batched.covariance, per_run.covariance)
         companion = m.companion_step(companion, np.nan_to_num(per_run.mean))
     expected = [False, True, baseline == "ukf", False]
     assert per_run.failed.tolist() == batched.failed.tolist() == expected

@@ -213,6 +213,13 @@ MUTATIONS = (
         (INTERFACES + "test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raising",),
     ),
     Mutation(
+        "per-run adapters never check the covariance",
+        "src/quadest/estimators/base.py",
+        "            finite &= np.isfinite(self._cov[runs]).all((-2, -1))\n",
+        "            finite = finite.copy()\n",
+        (INTERFACES + "test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raising",),
+    ),
+    Mutation(
         "diagonal Gaussian noise drawn with the variance instead of the standard deviation",
         "src/quadest/models/base.py",
         "    e *= diagonal\n",
@@ -222,8 +229,15 @@ MUTATIONS = (
     Mutation(
         "diagonal Gaussian log-density whitened by the variance",
         "src/quadest/models/base.py",
-        "(e * (1.0 / diagonal)) ** 2",
-        "(e * (1.0 / diagonal**2)) ** 2",
+        "(e * (1.0 / scale)) ** 2",
+        "(e * (1.0 / scale**2)) ** 2",
+        (INTERFACES + "test_gaussian_noise_log_density_and_sampling",),
+    ),
+    Mutation(
+        "diagonal Gaussian log-density taken for a semi-definite covariance",
+        "src/quadest/models/base.py",
+        " and np.all(diagonal > 0) else None",
+        " else None",
         (INTERFACES + "test_gaussian_noise_log_density_and_sampling",),
     ),
     Mutation(

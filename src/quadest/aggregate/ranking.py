@@ -3,10 +3,11 @@ docs/seed004-landing.md).
 
 Per run, the 3-D position and velocity RMSE (root of the sum of the three axes' mean squares) and
 the attitude error angle's RMSE (``error_angle``), then the job's own paired comparison
-(:func:`quadest.paired.paired_comparison`: paired bootstrap CI, Wilcoxon, Holm over the rows of
-this table) for each step of the ranking. A step *holds* when its Holm-corrected Wilcoxon p is
-below 0.05 and the better-ranked filter has the smaller RMSE, is *reversed* when p < 0.05 the
-other way, and is *not shown* otherwise.
+(:func:`quadest.paired.paired_comparison` on these three grouped states: paired bootstrap CI,
+Wilcoxon, Holm over every pair of the job's estimators × the three states) for each step of the
+ranking. A step *holds* when its Holm-corrected Wilcoxon p is below 0.05 and the better-ranked
+filter has the smaller RMSE, is *reversed* when p < 0.05 the other way, and is *not shown*
+otherwise.
 
 ``python -m quadest.aggregate.ranking JOB_DIR`` writes ``JOB_DIR/ranking.md`` and prints it.
 """

@@ -270,7 +270,7 @@ class FilterModel(ABC):
 
     def _noise_factor(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """``psd_sqrt(C)`` and, when that factor is diagonal, its diagonal (else ``None``), computed
-        once per matrix value (sampling and scoring call it every step)."""
+        once per matrix value (sampling calls it every step)."""
         cache = self.__dict__.setdefault("_noise_factors", {})
         key = C.tobytes()
         if key not in cache:
@@ -283,9 +283,19 @@ class FilterModel(ABC):
         """Draws of the process noise, shape ``(*size, q)``; N(0, Q) unless overridden."""
         return _gaussian_draws(rng, size, self._noise_factor(self.Q))
 
+    def _diagonal_scale(self, C: np.ndarray) -> np.ndarray | None:
+        """``√diag(C)`` (the diagonal of its Cholesky factor, exactly) when ``C`` is diagonal with a
+        positive diagonal, else ``None``; computed once per matrix value."""
+        cache = self.__dict__.setdefault("_diagonal_scales", {})
+        key = C.tobytes()
+        if key not in cache:
+            diagonal = np.diagonal(C)
+            cache[key] = np.sqrt(diagonal) if np.array_equal(C, np.diag(diagonal)) and np.all(diagonal > 0) else None
+        return cache[key]
+
     def process_noise_logpdf(self, w: np.ndarray) -> np.ndarray:
         """Log-density of process-noise values ``w`` (..., q) → (...); N(0, Q) unless overridden."""
-        return _gaussian_logpdf(w, self.Q, self._noise_factor(self.Q)[1])
+        return _gaussian_logpdf(w, self.Q, self._diagonal_scale(self.Q))
 
     def sample_measurement_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
         """Draws of the measurement noise, shape ``(*size, r)``; N(0, R) unless overridden."""
@@ -293,7 +303,7 @@ class FilterModel(ABC):
 
     def measurement_noise_logpdf(self, v: np.ndarray) -> np.ndarray:
         """Log-density of measurement-noise values ``v`` (..., r) → (...); N(0, R) unless overridden."""
-        return _gaussian_logpdf(v, self.R, self._noise_factor(self.R)[1])
+        return _gaussian_logpdf(v, self.R, self._diagonal_scale(self.R))
 
     # --- companion quantities (thesis: angles and positions integrated outside the filter) ---
 
@@ -348,16 +358,17 @@ def _gaussian_draws(
     return e
 
 
-def _gaussian_logpdf(e: np.ndarray, C: np.ndarray, diagonal: np.ndarray | None = None) -> np.ndarray:
+def _gaussian_logpdf(e: np.ndarray, C: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
     """``log N(e; 0, C)`` for a positive-definite ``C``, over the last axis of ``e``.
 
-    With ``diagonal``, the positive diagonal of a diagonal Cholesky factor of ``C``, the whitening
-    is a product by its reciprocals instead of a triangular solve: the arithmetic numpy's
-    OpenBLAS solve does for a diagonal factor (same values, checked in ``tests/test_models.py``),
-    without the solve's per-call cost, which dominated a particle filter's weighting."""
-    if diagonal is not None and np.all(diagonal > 0):
-        maha = np.sum((e * (1.0 / diagonal)) ** 2, axis=-1)
-        log_det = np.sum(np.log(diagonal))
+    With ``scale = √diag(C)`` for a diagonal ``C``, the whitening is a product by its reciprocals
+    instead of a Cholesky factorisation and a triangular solve: the arithmetic numpy's OpenBLAS
+    solve does for a diagonal factor, without the solve's per-call cost, which dominated a
+    particle filter's weighting. The values equal the general path's for up to 4 dimensions and
+    agree to about one ulp above (the squares are summed in another order)."""
+    if scale is not None:
+        maha = np.sum((e * (1.0 / scale)) ** 2, axis=-1)
+        log_det = np.sum(np.log(scale))
     else:
         L = np.linalg.cholesky(C)
         white = np.linalg.solve(L, np.moveaxis(e, -1, 0).reshape(C.shape[0], -1))
