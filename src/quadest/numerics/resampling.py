@@ -143,7 +143,8 @@ def resample_from_uniforms(scheme: str, weights: np.ndarray, uniforms: np.ndarra
     temporaries of a block stay in the processor's cache and, at 128 KiB, below glibc's default
     threshold for serving an allocation by ``mmap`` (a fresh mapping page-faults on first touch).
     On the development machine that takes the selection for 100 runs × 1000 particles from
-    ≈ 24 ns (one pass) and ≈ 15 ns (blocks of 2¹⁵) to ≈ 8 ns per particle (``docs/benchmarks.md``)."""
+    ≈ 24 ns (one pass) and ≈ 15 ns (blocks of 2¹⁵) to ≈ 8 ns per particle, measured alone
+    (``docs/benchmarks.md``)."""
     check_scheme(scheme)
     weights = np.asarray(weights, dtype=float)
     uniforms = np.asarray(uniforms, dtype=float)
