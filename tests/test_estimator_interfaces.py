@@ -139,7 +139,9 @@ def test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raisi
         means.append(adapter.mean.copy())
     assert adapter.failed.tolist() == [False, True, True, True]
     assert adapter.failure_reasons == {
-        1: "non-finite mean or covariance", 2: "ValueError: plugin bug", 3: "non-finite mean or covariance"
+        1: "non-finite mean or covariance",
+        2: "ValueError: plugin bug",
+        3: "non-finite mean or covariance",
     }
     assert np.isfinite(adapter.mean).all() and np.isfinite(adapter.covariance).all()
     np.testing.assert_array_equal(means[-1][1], means[0][1])  # frozen at its mean after step 1

@@ -66,8 +66,11 @@ def _main(cfg: DictConfig) -> float | None:
     # NEES dof: the error state's (a closed-loop or replay summary has vector states, no error_names)
     n, m = len(summary.get("error_names", summary["state_names"])), len(summary["measurement_names"])
     for name, est in summary["estimators"].items():
-        nis = (f"mean NIS {_fmt(est['mean_nis'])} ({m} dof, {_pct(est['nis_in_band'])} in band)" if m else
-               "NIS per sensor " + ", ".join(f"{s} {_fmt(v)}" for s, v in est.get("nis_by_sensor", {}).items()))
+        nis = (
+            f"mean NIS {_fmt(est['mean_nis'])} ({m} dof, {_pct(est['nis_in_band'])} in band)"
+            if m
+            else "NIS per sensor " + ", ".join(f"{s} {_fmt(v)}" for s, v in est.get("nis_by_sensor", {}).items())
+        )
         print(f"  {name:>8s}: {est['diverged']} of {cfg.runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
               f"({n} dof, {_pct(est['nees_in_band'])} of steps in the 95% band), {nis}, "
               f"{_fmt(est['step_time_us'], 1)} us/step/run"
