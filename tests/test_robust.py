@@ -1,5 +1,6 @@
 """The Huber measurement update (quadest.numerics.huber) and the robust filters built on it: hf,
-hckf, hhcf and ``robust: true`` on srukf.
+hckf, hhcf and ``robust: true`` on every sigma-point filter (srukf, ckf, srckf, ckf5, srckf5, cdkf,
+srcdkf, dd1, ghkf).
 
 - As γ → ∞ each Huber filter is its parent: bit for bit for the sigma-point filters (no residual
   exceeds γ, so every run keeps the parent's update, computed by the parent's code); to round-off
@@ -20,9 +21,12 @@ import statsmodels.api as sm
 from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
 from quadest.config.validate import validate
 from quadest.errors import ConfigError
-from quadest.estimators.cubature import CKF, CKF5
+from quadest.estimators.central_difference import CDKF, SRCDKF
+from quadest.estimators.cubature import CKF, CKF5, SRCKF, SRCKF5
+from quadest.estimators.divided_difference import DD1
 from quadest.estimators.extended import HuberEKF
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
+from quadest.estimators.gauss_hermite import GHKF
 from quadest.estimators.huber import HCKF, HHCF
 from quadest.estimators.srukf import SRUKF
 from quadest.models.base import MeasurementModel
@@ -33,14 +37,16 @@ from quadest.numerics.square_root import kalman_gain
 from quadest.sensors.noise_laws import NoiseLaw, draw_noise
 
 INF = 1e12  # γ beyond any whitened residual
-PAIRS = [  # (Huber filter, its parent)
-    (lambda m: HCKF(m, huber_threshold=INF), CKF),
-    (lambda m: HHCF(m, huber_threshold=INF), CKF5),
-    (lambda m: SRUKF(m, robust=True, huber_threshold=INF), SRUKF),
-]
+FAMILY = {"ckf": CKF, "srckf": SRCKF, "ckf5": CKF5, "srckf5": SRCKF5, "cdkf": CDKF, "srcdkf": SRCDKF, "dd1": DD1,
+          "ghkf": GHKF, "srukf": SRUKF}  # fmt: skip
+PAIRS = {  # Huber filter and its parent
+    "hckf": (lambda m: HCKF(m, huber_threshold=INF), CKF),
+    "hhcf": (lambda m: HHCF(m, huber_threshold=INF), CKF5),
+    **{name: (lambda m, c=cls: c(m, robust=True, huber_threshold=INF), cls) for name, cls in FAMILY.items()},
+}
 
 
-@pytest.mark.parametrize("pair", PAIRS, ids=["hckf", "hhcf", "srukf"])
+@pytest.mark.parametrize("pair", PAIRS.values(), ids=PAIRS.keys())
 def test_with_infinite_threshold_a_huber_sigma_point_filter_is_its_parent_bit_for_bit(pair):
     huber, parent = pair
     model = smooth_model(3, n=4, m=2, batch_size=3)
@@ -103,17 +109,18 @@ def _rlm(R: np.ndarray, P: np.ndarray, H: np.ndarray, nu: np.ndarray, gamma: flo
     return fit.params, np.linalg.inv(M.T @ (fit.weights[:, None] * M))
 
 
-ROBUST = [
-    lambda m, **kw: HCKF(m, **kw),
-    lambda m, **kw: HHCF(m, **kw),
-    lambda m, **kw: SRUKF(m, robust=True, **kw),
-    lambda m, **kw: HuberEKF(m, **kw),
-]
+ROBUST = {
+    "hckf": lambda m, **kw: HCKF(m, **kw),
+    "hhcf": lambda m, **kw: HHCF(m, **kw),
+    "hf": lambda m, **kw: HuberEKF(m, **kw),
+    **{name: (lambda m, c=cls, **kw: c(m, robust=True, **kw)) for name, cls in FAMILY.items()},
+}
 
 
-@pytest.mark.parametrize("make", ROBUST, ids=["hckf", "hhcf", "srukf", "hf"])
+@pytest.mark.parametrize("make", ROBUST.values(), ids=ROBUST.keys())
 def test_a_filters_huber_update_is_the_m_estimate_and_its_covariance(make):
-    """On a linear measurement the filter's update is the regression's: mean and covariance."""
+    """On a linear measurement the filter's update is the regression's: mean and covariance (every
+    rule integrates the linear measurement exactly, so the moments are the Kalman filter's)."""
     model = _constant_velocity(1)
     x0, P0 = np.array([[0.3, -0.2, 0.1, 0.05]]), random_spd(np.random.default_rng(4), 4)[None]
     z = np.array([[5.0, -0.4]])  # an outlier in the first component (σ = 0.5)
@@ -126,7 +133,18 @@ def test_a_filters_huber_update_is_the_m_estimate_and_its_covariance(make):
     assert est.diagnostics()["huber_robust_fraction"][0] == 1.0
 
 
-@pytest.mark.parametrize("make", ROBUST, ids=["hckf", "hhcf", "srukf", "hf"])
+def test_hckf_is_the_ckf_with_robust_true():
+    model = _constant_velocity(2)
+    rng = np.random.default_rng(8)
+    z = rng.standard_normal((2, 40, 2)) * np.where(rng.random((2, 40, 1)) < 0.2, 10.0, 0.5)
+    P0 = np.broadcast_to(np.eye(4), (2, 4, 4))
+    a = run_filter(HCKF(model, huber_threshold=2.0), model, np.zeros((2, 4)), P0, np.zeros((2, 40, 0)), z)
+    b = run_filter(CKF(model, robust=True, huber_threshold=2.0), model, np.zeros((2, 4)), P0, np.zeros((2, 40, 0)), z)
+    for got, ref in zip(a, b, strict=True):
+        assert np.array_equal(got, ref)
+
+
+@pytest.mark.parametrize("make", ROBUST.values(), ids=ROBUST.keys())
 def test_updates_without_measurement_rows_do_not_count_in_the_huber_fractions(make):
     """An INS-like model: an empty primary measurement (m = 0) every step, positions as a named
     sensor. One empty update and one outlying position update: one update measured something,

@@ -241,6 +241,13 @@ MUTATIONS = (
         (INTERFACES + "test_gaussian_noise_log_density_and_sampling",),
     ),
     Mutation(
+        "robust: true ignored by the family's filters",
+        "src/quadest/estimators/huber.py",
+        "huber_settings(huber_threshold, huber_max_iterations, huber_tolerance) if robust else None",
+        "None",
+        ("tests/test_robust.py::test_a_filters_huber_update_is_the_m_estimate_and_its_covariance",),
+    ),
+    Mutation(
         "Huber fractions counting updates without measurement rows",
         "src/quadest/numerics/huber.py",
         "        if rows == 0:\n            return\n",

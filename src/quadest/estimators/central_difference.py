@@ -9,9 +9,11 @@ its posterior factor is ``qr{[S⁻ − K Y1, K Y2, K √R]}``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from quadest.estimators.huber import RobustParams, robust_settings
 from quadest.estimators.params import ranged
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter, SquareRootSigmaPointFilter
 from quadest.models.base import FilterModel
@@ -21,7 +23,7 @@ SQRT3 = float(np.sqrt(3.0))
 
 
 @dataclass
-class CentralDifferenceParams:
+class CentralDifferenceParams(RobustParams):
     """Configuration of ``estimator=cdkf``/``srcdkf``: the step ``h`` (h² = 3 is optimal for a
     Gaussian prior, Nørgaard et al. 2000)."""
 
@@ -36,8 +38,8 @@ class CDKF(SigmaPointKalmanFilter):
     config_name = "cdkf"
     Params = CentralDifferenceParams
 
-    def __init__(self, model: FilterModel, h: float = SQRT3, augmented: bool = False) -> None:
-        super().__init__(model, CentralDifferenceRule(float(h)), augmented)
+    def __init__(self, model: FilterModel, h: float = SQRT3, augmented: bool = False, **robust: Any) -> None:
+        super().__init__(model, CentralDifferenceRule(float(h)), augmented, robust_settings(**robust))
 
 
 class SRCDKF(SquareRootSigmaPointFilter):
@@ -46,5 +48,5 @@ class SRCDKF(SquareRootSigmaPointFilter):
     config_name = "srcdkf"
     Params = CentralDifferenceParams
 
-    def __init__(self, model: FilterModel, h: float = SQRT3, augmented: bool = False) -> None:
-        super().__init__(model, CentralDifferenceRule(float(h)), augmented)
+    def __init__(self, model: FilterModel, h: float = SQRT3, augmented: bool = False, **robust: Any) -> None:
+        super().__init__(model, CentralDifferenceRule(float(h)), augmented, robust_settings(**robust))

@@ -10,23 +10,27 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+from quadest.estimators.huber import RobustParams, robust_settings
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter, SquareRootSigmaPointFilter
 from quadest.models.base import FilterModel
 from quadest.numerics.rules import CubatureRule, FifthDegreeCubatureRule
 
 
 @dataclass
-class CubatureParams:
-    """Configuration of ``estimator=ckf``/``srckf`` (the third-degree rule has no parameters)."""
+class CubatureParams(RobustParams):
+    """Configuration of ``estimator=ckf``/``srckf`` (the third-degree rule has no parameters; the
+    ``robust`` and ``huber_*`` keys of :class:`~quadest.estimators.huber.RobustParams`)."""
 
     kind: str = "ckf"
     augmented: bool = False
 
 
 @dataclass
-class FifthDegreeCubatureParams:
-    """Configuration of ``estimator=ckf5``/``srckf5`` (the fifth-degree rule has no parameters)."""
+class FifthDegreeCubatureParams(RobustParams):
+    """Configuration of ``estimator=ckf5``/``srckf5`` (the fifth-degree rule has no parameters; the
+    ``robust`` and ``huber_*`` keys of :class:`~quadest.estimators.huber.RobustParams`)."""
 
     kind: str = "ckf5"
     augmented: bool = False
@@ -38,8 +42,8 @@ class CKF(SigmaPointKalmanFilter):
     config_name = "ckf"
     Params = CubatureParams
 
-    def __init__(self, model: FilterModel, augmented: bool = False) -> None:
-        super().__init__(model, CubatureRule(), augmented)
+    def __init__(self, model: FilterModel, augmented: bool = False, **robust: Any) -> None:
+        super().__init__(model, CubatureRule(), augmented, robust_settings(**robust))
 
 
 class SRCKF(SquareRootSigmaPointFilter):
@@ -48,8 +52,8 @@ class SRCKF(SquareRootSigmaPointFilter):
     config_name = "srckf"
     Params = CubatureParams
 
-    def __init__(self, model: FilterModel, augmented: bool = False) -> None:
-        super().__init__(model, CubatureRule(), augmented)
+    def __init__(self, model: FilterModel, augmented: bool = False, **robust: Any) -> None:
+        super().__init__(model, CubatureRule(), augmented, robust_settings(**robust))
 
 
 class CKF5(SigmaPointKalmanFilter):
@@ -58,8 +62,8 @@ class CKF5(SigmaPointKalmanFilter):
     config_name = "ckf5"
     Params = FifthDegreeCubatureParams
 
-    def __init__(self, model: FilterModel, augmented: bool = False) -> None:
-        super().__init__(model, FifthDegreeCubatureRule(), augmented)
+    def __init__(self, model: FilterModel, augmented: bool = False, **robust: Any) -> None:
+        super().__init__(model, FifthDegreeCubatureRule(), augmented, robust_settings(**robust))
 
 
 class SRCKF5(SquareRootSigmaPointFilter):
@@ -68,5 +72,5 @@ class SRCKF5(SquareRootSigmaPointFilter):
     config_name = "srckf5"
     Params = FifthDegreeCubatureParams
 
-    def __init__(self, model: FilterModel, augmented: bool = False) -> None:
-        super().__init__(model, FifthDegreeCubatureRule(), augmented)
+    def __init__(self, model: FilterModel, augmented: bool = False, **robust: Any) -> None:
+        super().__init__(model, FifthDegreeCubatureRule(), augmented, robust_settings(**robust))

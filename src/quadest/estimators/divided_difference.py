@@ -11,9 +11,11 @@ terms on a nonlinear one.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from quadest.estimators.huber import RobustParams, robust_settings
 from quadest.estimators.params import ranged
 from quadest.estimators.sigma_point import SquareRootSigmaPointFilter
 from quadest.models.base import FilterModel
@@ -39,7 +41,7 @@ class FirstOrderDividedDifferenceRule(CentralDifferenceRule):
 
 
 @dataclass
-class DD1Params:
+class DD1Params(RobustParams):
     """Configuration of ``estimator=dd1``."""
 
     kind: str = "dd1"
@@ -53,5 +55,7 @@ class DD1(SquareRootSigmaPointFilter):
     config_name = "dd1"
     Params = DD1Params
 
-    def __init__(self, model: FilterModel, h: float = float(np.sqrt(3.0)), augmented: bool = False) -> None:
-        super().__init__(model, FirstOrderDividedDifferenceRule(float(h)), augmented)
+    def __init__(
+        self, model: FilterModel, h: float = float(np.sqrt(3.0)), augmented: bool = False, **robust: Any
+    ) -> None:
+        super().__init__(model, FirstOrderDividedDifferenceRule(float(h)), augmented, robust_settings(**robust))

@@ -5,7 +5,9 @@ the sigma-point filter with a tensor-product Gauss–Hermite rule of ``p`` point
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+from quadest.estimators.huber import RobustParams, robust_settings
 from quadest.estimators.params import ranged
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter
 from quadest.models.base import FilterModel
@@ -13,7 +15,7 @@ from quadest.numerics.rules import GaussHermiteRule
 
 
 @dataclass
-class GaussHermiteParams:
+class GaussHermiteParams(RobustParams):
     """Configuration of ``estimator=ghkf``: points per dimension (3 is fifth-degree exact)."""
 
     kind: str = "ghkf"
@@ -27,5 +29,5 @@ class GHKF(SigmaPointKalmanFilter):
     config_name = "ghkf"
     Params = GaussHermiteParams
 
-    def __init__(self, model: FilterModel, p: int = 3, augmented: bool = False) -> None:
-        super().__init__(model, GaussHermiteRule(p), augmented)
+    def __init__(self, model: FilterModel, p: int = 3, augmented: bool = False, **robust: Any) -> None:
+        super().__init__(model, GaussHermiteRule(p), augmented, robust_settings(**robust))

@@ -39,6 +39,24 @@ def huber_settings(threshold: float, max_iterations: int, tolerance: float) -> H
 
 
 @dataclass
+class RobustParams(HuberParams):
+    """``robust: true`` replaces a sigma-point filter's Kalman update by the Huber one (Karlgaard &
+    Schaub 2007), with the ``huber_*`` settings; any filter of the family takes these keys."""
+
+    robust: bool = False
+
+
+def robust_settings(
+    robust: bool = False,
+    huber_threshold: float = DEFAULT.threshold,
+    huber_max_iterations: int = DEFAULT.max_iterations,
+    huber_tolerance: float = DEFAULT.tolerance,
+) -> HuberSettings | None:
+    """The Huber settings of the :class:`RobustParams` keys, ``None`` for the Kalman update."""
+    return huber_settings(huber_threshold, huber_max_iterations, huber_tolerance) if robust else None
+
+
+@dataclass
 class HuberCubatureParams(HuberParams):
     """Configuration of ``estimator=hckf``/``hhcf``."""
 

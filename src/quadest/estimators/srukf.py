@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from quadest.estimators.huber import DEFAULT, HuberParams, huber_settings
+from quadest.estimators.huber import DEFAULT, HuberParams, robust_settings
 from quadest.estimators.params import ranged, unscented_constraints
 from quadest.estimators.sigma_point import SquareRootSigmaPointFilter
 from quadest.models.base import FilterModel
@@ -63,5 +63,5 @@ class SRUKF(SquareRootSigmaPointFilter):
         huber_max_iterations: int = DEFAULT.max_iterations,
         huber_tolerance: float = DEFAULT.tolerance,
     ) -> None:
-        huber = huber_settings(huber_threshold, huber_max_iterations, huber_tolerance) if robust else None
+        huber = robust_settings(robust, huber_threshold, huber_max_iterations, huber_tolerance)
         super().__init__(model, UnscentedRule(float(alpha), float(beta), float(kappa)), augmented, huber)
