@@ -222,8 +222,8 @@ MUTATIONS = (
     Mutation(
         "diagonal Gaussian noise drawn with the variance instead of the standard deviation",
         "src/quadest/models/base.py",
-        "    e *= diagonal\n",
-        "    e *= diagonal**2\n",
+        "        e *= scale\n",
+        "        e *= scale**2\n",
         (INTERFACES + "test_gaussian_noise_log_density_and_sampling",),
     ),
     Mutation(
@@ -242,7 +242,7 @@ MUTATIONS = (
     ),
     Mutation(
         "robust: true ignored by the family's filters",
-        "src/quadest/estimators/huber.py",
+        "src/quadest/estimators/robust_params.py",
         "huber_settings(huber_threshold, huber_max_iterations, huber_tolerance) if robust else None",
         "None",
         ("tests/test_robust.py::test_a_filters_huber_update_is_the_m_estimate_and_its_covariance",),

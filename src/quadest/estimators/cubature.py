@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from quadest.estimators.huber import RobustParams, robust_settings
+from quadest.estimators.robust_params import RobustParams, robust_settings
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter, SquareRootSigmaPointFilter
 from quadest.models.base import FilterModel
 from quadest.numerics.rules import CubatureRule, FifthDegreeCubatureRule
@@ -21,7 +21,7 @@ from quadest.numerics.rules import CubatureRule, FifthDegreeCubatureRule
 @dataclass
 class CubatureParams(RobustParams):
     """Configuration of ``estimator=ckf``/``srckf`` (the third-degree rule has no parameters; the
-    ``robust`` and ``huber_*`` keys of :class:`~quadest.estimators.huber.RobustParams`)."""
+    ``robust`` and ``huber_*`` keys of :class:`~quadest.estimators.robust_params.RobustParams`)."""
 
     kind: str = "ckf"
     augmented: bool = False
@@ -30,7 +30,7 @@ class CubatureParams(RobustParams):
 @dataclass
 class FifthDegreeCubatureParams(RobustParams):
     """Configuration of ``estimator=ckf5``/``srckf5`` (the fifth-degree rule has no parameters; the
-    ``robust`` and ``huber_*`` keys of :class:`~quadest.estimators.huber.RobustParams`)."""
+    ``robust`` and ``huber_*`` keys of :class:`~quadest.estimators.robust_params.RobustParams`)."""
 
     kind: str = "ckf5"
     augmented: bool = False

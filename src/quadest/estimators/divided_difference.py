@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from quadest.estimators.huber import RobustParams, robust_settings
 from quadest.estimators.params import ranged
+from quadest.estimators.robust_params import RobustParams, robust_settings
 from quadest.estimators.sigma_point import SquareRootSigmaPointFilter
 from quadest.models.base import FilterModel
 from quadest.numerics.rules import CentralDifferenceRule

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadest.estimators.error_state_ekf import BatchedEKFBase
-from quadest.estimators.huber import DEFAULT, HuberParams, huber_settings
+from quadest.estimators.robust_params import DEFAULT, HuberParams, huber_settings
 from quadest.models.base import FilterModel
 from quadest.numerics import kalman_gain
 from quadest.numerics.huber import HuberCounts, huber_update

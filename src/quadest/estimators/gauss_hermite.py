@@ -7,8 +7,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from quadest.estimators.huber import RobustParams, robust_settings
 from quadest.estimators.params import ranged
+from quadest.estimators.robust_params import RobustParams, robust_settings
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter
 from quadest.models.base import FilterModel
 from quadest.numerics.rules import GaussHermiteRule

@@ -6,15 +6,15 @@ The whole batch advances in one call per step: sigma points (B, 2n+1, n) go thro
 ``f`` and ``h`` at once; ``qr`` and ``cholupdate`` are batched (:mod:`quadest.numerics`). The
 W0 downdate (eqs 5.19, 5.24) is the unscented rule's (:class:`~quadest.numerics.rules.UnscentedRule`).
 ``robust: true`` replaces the Kalman update by the Huber M-estimation update (Karlgaard & Schaub
-2007; :mod:`quadest.estimators.huber`).
+2007; :mod:`quadest.numerics.huber`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from quadest.estimators.huber import DEFAULT, HuberParams, robust_settings
 from quadest.estimators.params import ranged, unscented_constraints
+from quadest.estimators.robust_params import DEFAULT, HuberParams, robust_settings
 from quadest.estimators.sigma_point import SquareRootSigmaPointFilter
 from quadest.models.base import FilterModel
 from quadest.numerics.rules import UnscentedRule

@@ -268,20 +268,13 @@ class FilterModel(ABC):
         """Measurement with explicit noise ``v`` (B, K, r): ``h(x, u) + v`` unless overridden."""
         return self.h(x, u) + v
 
-    def _noise_factor(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """``psd_sqrt(C)`` and, when that factor is diagonal, its diagonal (else ``None``), computed
-        once per matrix value (sampling calls it every step)."""
+    def _noise_factor(self, C: np.ndarray) -> np.ndarray:
+        """``psd_sqrt(C)``, computed once per matrix value (sampling calls it every step)."""
         cache = self.__dict__.setdefault("_noise_factors", {})
         key = C.tobytes()
         if key not in cache:
-            L = psd_sqrt(C, "noise covariance")
-            diagonal = np.diagonal(L).copy()
-            cache[key] = (L, diagonal if np.array_equal(L, np.diag(diagonal)) else None)
+            cache[key] = psd_sqrt(C, "noise covariance")
         return cache[key]
-
-    def sample_process_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
-        """Draws of the process noise, shape ``(*size, q)``; N(0, Q) unless overridden."""
-        return _gaussian_draws(rng, size, self._noise_factor(self.Q))
 
     def _diagonal_scale(self, C: np.ndarray) -> np.ndarray | None:
         """``√diag(C)`` (the diagonal of its Cholesky factor, exactly) when ``C`` is diagonal with a
@@ -293,13 +286,28 @@ class FilterModel(ABC):
             cache[key] = np.sqrt(diagonal) if np.array_equal(C, np.diag(diagonal)) and np.all(diagonal > 0) else None
         return cache[key]
 
+    def _gaussian_draws(self, rng: np.random.Generator, size: tuple[int, ...], C: np.ndarray) -> np.ndarray:
+        """``(*size, q)`` draws of N(0, C): standard normals times the factor's transpose; for a
+        diagonal ``C`` one product per value by ``√diag(C)`` (the matrix product's values exactly:
+        its other terms are exact zeros)."""
+        e = rng.standard_normal((*size, C.shape[0]))
+        scale = self._diagonal_scale(C)
+        if scale is None:
+            return e @ self._noise_factor(C).T
+        e *= scale
+        return e
+
+    def sample_process_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
+        """Draws of the process noise, shape ``(*size, q)``; N(0, Q) unless overridden."""
+        return self._gaussian_draws(rng, size, self.Q)
+
     def process_noise_logpdf(self, w: np.ndarray) -> np.ndarray:
         """Log-density of process-noise values ``w`` (..., q) → (...); N(0, Q) unless overridden."""
         return _gaussian_logpdf(w, self.Q, self._diagonal_scale(self.Q))
 
     def sample_measurement_noise(self, rng: np.random.Generator, size: tuple[int, ...]) -> np.ndarray:
         """Draws of the measurement noise, shape ``(*size, r)``; N(0, R) unless overridden."""
-        return _gaussian_draws(rng, size, self._noise_factor(self.R))
+        return self._gaussian_draws(rng, size, self.R)
 
     def measurement_noise_logpdf(self, v: np.ndarray) -> np.ndarray:
         """Log-density of measurement-noise values ``v`` (..., r) → (...); N(0, R) unless overridden."""
@@ -342,20 +350,6 @@ class FilterModel(ABC):
             setattr(other, name, getattr(self, name)[idx])
         other.batch_size = len(np.arange(self.batch_size)[idx])
         return other
-
-
-def _gaussian_draws(
-    rng: np.random.Generator, size: tuple[int, ...], factor: tuple[np.ndarray, np.ndarray | None]
-) -> np.ndarray:
-    """``(*size, q)`` draws of N(0, L Lᵀ): standard normals times ``Lᵀ``, for a diagonal factor
-    ``(L, diagonal)`` one product per value (the matrix product's values exactly: its other terms
-    are exact zeros)."""
-    L, diagonal = factor
-    e = rng.standard_normal((*size, L.shape[0]))
-    if diagonal is None:
-        return e @ L.T
-    e *= diagonal
-    return e
 
 
 def _gaussian_logpdf(e: np.ndarray, C: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
