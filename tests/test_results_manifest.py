@@ -1,0 +1,62 @@
+"""results/manifest.yaml lists every checked-in results folder with the commands that make it, and
+results/ keeps to its size budget."""
+
+from __future__ import annotations
+
+import importlib.util
+import shlex
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BUDGET_BYTES = 30_000_000  # results/README.md: results/ at most 30 MB (10^6 bytes) in git
+
+
+def load_tool():
+    spec = importlib.util.spec_from_file_location("regenerate_results", ROOT / "tools" / "regenerate_results.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def tracked_results() -> list[Path]:
+    out = subprocess.run(["git", "ls-files", "results"], cwd=ROOT, capture_output=True, text=True, check=True)
+    return [ROOT / line for line in out.stdout.splitlines()]
+
+
+def test_manifest_names_exactly_the_checked_in_folders():
+    manifest = load_tool().read_manifest()
+    folders = {
+        path.relative_to(ROOT / "results").parts[0] for path in tracked_results() if path.parent != ROOT / "results"
+    }
+    assert set(manifest) == folders
+
+
+def test_every_manifest_command_writes_into_its_own_folder():
+    """A command that wrote elsewhere would leave its folder stale after a regeneration."""
+    for name, commands in load_tool().read_manifest().items():
+        for command in commands:
+            argv = shlex.split(command)
+            assert argv[0] in {"quadest", "python"}, command
+            assert any(arg.endswith(f"results/{name}") for arg in argv), command
+
+
+def test_every_folder_is_described_in_results_readme():
+    readme = (ROOT / "results" / "README.md").read_text(encoding="utf-8")
+    for name in load_tool().read_manifest():
+        assert f"`{name}/`" in readme, name
+
+
+def test_results_keep_to_their_size_budget():
+    size = sum(path.stat().st_size for path in tracked_results() if path.is_file())
+    assert size <= BUDGET_BYTES, f"results/ holds {size / 1e6:.1f} MB in git; the budget is 30 MB"
+
+
+def test_list_runs_nothing(capsys):
+    assert load_tool().main(["--list", "--only", "ungm_pf"]) == 0
+    assert "quadest experiment=ungm_pf" in capsys.readouterr().out
+
+
+def test_unknown_folder_is_refused(capsys):
+    assert load_tool().main(["--only", "no_such_folder"]) == 2
+    assert "allowed" in capsys.readouterr().err

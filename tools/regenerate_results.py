@@ -1,0 +1,95 @@
+"""Regenerate every checked-in result folder, then the reproductions ledger.
+
+Usage, from the repository root (with quadest installed)::
+
+    python tools/regenerate_results.py                 # every folder of results/manifest.yaml, in order
+    python tools/regenerate_results.py --only NAME ... # only these folders
+    python tools/regenerate_results.py --list          # the folders and their commands, nothing run
+
+Each folder is made afresh: the old folder is moved aside, the folder's commands run in order
+(they go through the result cache, so a second regeneration at the same code only reads it), and
+the old folder is deleted once every command succeeded, or put back if one failed. Afterwards
+``python -m quadest.aggregate.reproductions`` rewrites ``docs/reproductions.md`` from the new
+results. The exit status is non-zero if any command failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+MANIFEST = ROOT / "results" / "manifest.yaml"
+
+
+def read_manifest(path: Path = MANIFEST) -> dict[str, list[str]]:
+    """Folder name (under ``results/``) -> the commands that make it, in order."""
+    manifest = yaml.safe_load(path.read_text(encoding="utf-8"))
+    for name, commands in manifest.items():
+        if not commands or not all(isinstance(c, str) and c.strip() for c in commands):
+            raise SystemExit(f"regenerate_results: {path.name}: '{name}' needs a list of commands")
+    return manifest
+
+
+def run(command: str) -> bool:
+    """Run one manifest command from the repository root; ``quadest`` and ``python`` are those of
+    this interpreter's environment."""
+    argv = shlex.split(command)
+    if argv[0] == "python":
+        argv[0] = sys.executable
+    elif argv[0] == "quadest":
+        argv = [sys.executable, "-m", "quadest.cli", *argv[1:]]
+    start = time.perf_counter()
+    done = subprocess.run(argv, cwd=ROOT, check=False)
+    print(f"  {time.perf_counter() - start:6.0f} s  exit {done.returncode}  {command}", flush=True)
+    return done.returncode == 0
+
+
+def regenerate(name: str, commands: list[str]) -> bool:
+    """Make ``results/name`` afresh; the old folder comes back if a command fails."""
+    folder = ROOT / "results" / name
+    aside = folder.with_name(f".{name}.old")
+    shutil.rmtree(aside, ignore_errors=True)
+    if folder.exists():
+        folder.rename(aside)
+    ok = all(run(command) for command in commands)
+    if ok:
+        shutil.rmtree(aside, ignore_errors=True)
+    elif aside.exists():
+        shutil.rmtree(folder, ignore_errors=True)
+        aside.rename(folder)
+    return ok
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", nargs="+", metavar="NAME", help="only these folders of results/manifest.yaml")
+    parser.add_argument("--list", action="store_true", help="list the folders and their commands, run nothing")
+    args = parser.parse_args(argv)
+    manifest = read_manifest()
+    unknown = sorted(set(args.only or ()) - set(manifest))
+    if unknown:
+        print(f"regenerate_results: --only: unknown folder(s) {unknown}; allowed: {sorted(manifest)}", file=sys.stderr)
+        return 2
+    names = args.only or list(manifest)
+    if args.list:
+        for name in names:
+            print(f"{name}:\n" + "".join(f"  {command}\n" for command in manifest[name]), end="")
+        return 0
+    failed = [name for name in names if not regenerate(name, manifest[name])]
+    ledger = [sys.executable, "-m", "quadest.aggregate.reproductions"]
+    ok_ledger = subprocess.run(ledger, cwd=ROOT, check=False).returncode == 0
+    if failed:
+        print(f"regenerate_results: failed: {', '.join(failed)} (their old folders are back)", file=sys.stderr)
+    return int(bool(failed) or not ok_ledger)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
