@@ -1,4 +1,4 @@
-"""Attitude metrics of the job (issue 11): the derived errors (error angle, roll, pitch, yaw in
+"""Attitude metrics of the job: the derived errors (error angle, roll, pitch, yaw in
 degrees) against scipy, their accumulation in the runner, the bias convergence time, and what the
 ``quadest`` command writes and prints for ``model=attitude``."""
 

@@ -134,7 +134,7 @@ def test_weights_and_points_match_filterpy(alpha, beta, kappa):
 
 
 def test_negative_center_weight_at_small_alpha():
-    """W0(c) ≈ −1e6 at α = 1e-3, n = 6 (../shared/reference/srukf.md)."""
+    """W0(c) ≈ −1e6 at α = 1e-3, n = 6 (thesis eqs 5.2–5.9; docs/sources.md)."""
     w = ut_weights(6, 1e-3, 2.0, 0.0)
     assert -1.0e6 * 1.01 < w.wc[0] < -1.0e6 * 0.99
     assert np.isclose(w.wm.sum(), 1.0)

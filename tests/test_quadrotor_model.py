@@ -50,7 +50,7 @@ def test_hover_equilibrium_holds():
     state[:, 12:16] = P.hover_speed
     d = truth_derivative(P, state, state[:, 12:16])
     np.testing.assert_allclose(d, 0.0, atol=1e-12)
-    assert abs(P.hover_speed - 225.7) < 0.1  # ../shared/reference/quadrotor.md
+    assert abs(P.hover_speed - 225.7) < 0.1  # sqrt(m g / 4 b) with the OS4 m and b (docs/sources.md)
 
 
 def test_drag_free_energy_balance():

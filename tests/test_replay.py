@@ -268,7 +268,7 @@ def replay_outputs(tmp_path_factory):
 
 
 def test_replay_meets_the_goal_and_is_no_further_from_px4_than_the_ahrs_filters(replay_outputs):
-    """Issue 11's goal on the shipped log: roll and pitch within 0.5 deg RMS of PX4's estimate
+    """The replay's goal on the shipped log (docs/replay.md): roll and pitch within 0.5 deg RMS of PX4's estimate
     after the first 5 s, and no further from it than Madgwick, Mahony and the ahrs EKF."""
     out, _ = replay_outputs
     s = pd.read_csv(out / "rmse_summary.csv").set_index(["estimator", "state"])["rmse_mean"]

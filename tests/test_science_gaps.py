@@ -1,4 +1,4 @@
-"""Tests that fail when the science breaks (issue 15): divergence bookkeeping against hand-computed
+"""Tests that fail when the science breaks: divergence bookkeeping against hand-computed
 values, the truth-side MIMU errors against hand-computed values, and common random numbers
 between estimators of different kinds."""
 

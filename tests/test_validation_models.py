@@ -23,7 +23,7 @@ from quadest.runner import run_estimator
 
 
 def test_chi2_band_matches_the_reference_values():
-    """../shared/reference/estimators.md: n = 2, N = 50 ⇒ [1.48, 2.59]; n = 6, N = 50 ⇒ [5.08, 7.00]."""
+    """χ² quantiles (docs/sources.md): n = 2, N = 50 ⇒ [1.48, 2.59]; n = 6, N = 50 ⇒ [5.08, 7.00]."""
     for dof, expected in ((2, (1.48, 2.59)), (6, (5.08, 7.00))):
         lo, hi = chi2_band(dof, 50)
         assert (round(float(lo), 2), round(float(hi), 2)) == expected

@@ -2,7 +2,7 @@
 
 The configs live in the repository's top-level ``conf/`` and are copied into the wheel as
 ``quadest/conf``. Hydra needs an absolute directory for a console script (a relative
-``config_path`` fails for wheel and editable installs alike, ``../shared/reference/hydra.md``),
+``config_path`` fails for wheel and editable installs alike, docs/sources.md),
 so it is computed here: the packaged copy first, the repository's ``conf/`` second.
 """
 

@@ -2,8 +2,8 @@
 
 Same α, β, κ keys as the SR-UKF. filterpy 2.0 redraws the sigma points after the time update
 and takes the Cholesky factor whose rows are the columns of the lower factor, so with equal
-parameters it is the same filter as the SR-UKF in exact arithmetic (``../shared/reference/
-srukf.md``). It works on one run; the framework's :class:`PerRunAdapter` loops it over the batch.
+parameters it is the same filter as the SR-UKF in exact arithmetic (docs/srukf.md,
+docs/sources.md). It works on one run; the framework's :class:`PerRunAdapter` loops it over the batch.
 
 filterpy calls ``fx`` and ``hx`` once per sigma point. :class:`_PointBatchedUKF` keeps filterpy's
 UKF equations untouched and only evaluates all 2n+1 points in one vectorised model call: the time

@@ -1,3 +1,3 @@
 """The shared quadrotor: OS4 rigid body with rotors and motors, backstepping controller,
 scenarios, the truth simulation that flies them, and the plant the closed loop steps
-(``../shared/reference/quadrotor.md``)."""
+(docs/sources.md, "The quadrotor model")."""

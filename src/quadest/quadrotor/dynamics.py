@@ -1,4 +1,4 @@
-"""Rigid-body and rotor dynamics of the quadrotor (``../shared/reference/quadrotor.md``).
+"""Rigid-body and rotor dynamics of the quadrotor (OS4: Bouabdallah & Siegwart 2005; docs/sources.md).
 
 Truth state (16): ``[p (3), v (3), Θ (3), ω (3), Ω (4)]`` — earth-frame position and velocity,
 ZYX Euler angles, body rates and the four actual rotor speeds. All functions work over leading

@@ -1,4 +1,4 @@
-"""Laws of a sensor's white noise that the filters do not know about (issue 12, seed 004).
+"""Laws of a sensor's white noise that the filters do not know about (the robust filters of seed 004).
 
 Every law is the nominal Gaussian draw ``σ·n`` (``n`` standard normal) times a per-sample
 multiplier ``s`` drawn after it from the same generator:
