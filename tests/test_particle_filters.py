@@ -200,6 +200,11 @@ def test_ess_schedule_resamples_only_below_the_threshold_and_counts():
         (BootstrapPF, {"estimate": "median"}),
         (BootstrapPF, {"roughening": -1.0}),
         (BootstrapPF, {"initial_cloud": "grid"}),
+        (BootstrapPF, {"initial_range": [1.0, 0.0]}),
+        (BootstrapPF, {"initial_range": [0.0]}),
+        (BootstrapPF, {"weights": "linear"}),
+        (BootstrapPF, {"weight_floor": 0.0}),
+        (BootstrapPF, {"vanished_weights": "drop"}),
         (EKPF, {"proposal_Q": 0.0}),
         (ILOPF, {"coefficient": "gamma"}),
         (ILOPF, {"threshold": 0.0}),
@@ -210,6 +215,29 @@ def test_bad_options_are_one_line_config_errors(cls, bad):
     model = linear_gaussian_problem(runs=1, steps=1)[0]
     with pytest.raises(ConfigError, match=next(iter(bad))):
         cls(model, **bad)
+
+
+@pytest.mark.parametrize(
+    ("kind", "bad"),
+    [
+        ("pf", {"weights": "linear"}),
+        ("ekpf", {"vanished_weights": "drop"}),
+        ("upf", {"resampling": "roulette"}),
+        ("ilopf", {"initial_cloud": "grid"}),
+        ("ilopf", {"coefficient": "gamma"}),
+        ("pf", {"initial_range": [2.0, 2.0]}),
+        ("ekpf", {"weight_floor": -1.0}),
+    ],
+)
+def test_bad_choices_are_caught_by_the_pre_run_validation(kind, bad):
+    """The same options as the constructor refuses, found from the ``Params`` alone (what
+    ``quadest`` checks before any work)."""
+    from quadest.estimators.params import parameter_problem
+    from quadest.estimators.registry import builtin_estimators
+
+    key, value = next(iter(bad.items()))
+    problem = parameter_problem(builtin_estimators()[kind].params, bad, 3)
+    assert problem is not None and problem[:2] == (key, value)
 
 
 def test_initialize_without_generators_says_what_is_missing():
@@ -332,3 +360,130 @@ def test_seed001_rate_model_jacobian_matches_central_differences():
     u = rng.uniform(150.0, 300.0, size=(2, 4))
     np.testing.assert_allclose(model.F_points(x, u), model.jacobian_fd_points(model.f, x, u), rtol=0, atol=1e-8)
     np.testing.assert_allclose(model.F(x[:, 0], u), model.F_points(x, u)[:, 0], rtol=1e-14)
+
+
+def _recording_proposals(est) -> list:
+    """Wrap ``est.propose`` so every proposed cloud (B, N, n) is kept (before weighting and resampling)."""
+    proposed, propose = [], est.propose
+
+    def record(*args):
+        x_new, log_q = propose(*args)
+        proposed.append(x_new.copy())
+        return x_new, log_q
+
+    est.propose = record
+    return proposed
+
+
+def test_linear_floor_weights_are_the_likelihood_plus_the_floor_normalised():
+    """One bootstrap step without resampling: the weights equal (N(y; C x_i, R) + floor) / Σ, the
+    density from scipy, with a floor at the median likelihood so that it matters for half the
+    particles (added in the log domain instead, or left out, the weights differ by far more than
+    round-off). The proposed cloud does not depend on the weights, so both runs see it."""
+    model, x0, P0, u, z = linear_gaussian_problem(runs=1, steps=1)
+    options = {"particles": 50, "schedule": "ess", "ess_threshold": 1e-9}  # ESS >= 1 > 50e-9: never resamples
+    exact = BootstrapPF(model, **options)
+    proposed = _recording_proposals(exact)
+    _run(exact, x0, P0, u, z, [7])
+    lik = multivariate_normal(mean=np.zeros(2), cov=model.R).pdf(z[0, 1] - proposed[0][0] @ model.C.T)
+    floor = float(np.median(lik))
+    floored = BootstrapPF(model, weights="linear_floor", weight_floor=floor, **options)
+    _run(floored, x0, P0, u, z, [7])
+    np.testing.assert_array_equal(floored.x, exact.x)
+    expected = (lik + floor) / np.sum(lik + floor)
+    np.testing.assert_allclose(np.exp(floored.logw[0]), expected, rtol=1e-12)  # round-off of exp/log
+    np.testing.assert_allclose(np.exp(exact.logw[0]), lik / lik.sum(), rtol=1e-12)
+    assert floored.floored_steps.tolist() == [0]
+
+
+def test_when_no_particle_explains_y_the_floor_gives_equal_weights_and_no_correction():
+    """A measurement 1e3 away (log-likelihoods around −1e6: finite, but exp underflows to 0): with
+    ``linear_floor`` every weight is the floor, the weights are exactly 1/N, the estimate is the
+    plain mean of the prior cloud and systematic resampling of equal weights keeps every particle
+    once, in order (position (i + U)/N lies in particle i's slice). The exact log-domain filter
+    instead puts (almost) all weight on the particle nearest the measurement."""
+    model, x0, P0, u, z = linear_gaussian_problem(runs=2, steps=3)
+    far = z.copy()
+    far[:, 2] += 1e3
+    runs = {}
+    for weights in ("linear_floor", "log"):
+        est = BootstrapPF(model, particles=40, weights=weights, resampling="systematic")
+        proposed = _recording_proposals(est)
+
+        def check_step_2(est, k, proposed=proposed, weights=weights):
+            if k == 3:
+                runs[weights] = (proposed[1], est.x.copy(), est.mean.copy(), est.ess.copy())
+
+        _run(est, x0, P0, u, far, [1, 2], before_update=check_step_2)
+        assert est.floored_steps.tolist() == [1, 1]
+        assert not est.failed.any()
+    cloud, after, mean, ess = runs["linear_floor"]
+    np.testing.assert_allclose(ess, [40.0, 40.0], rtol=1e-14)  # 1/Σ(1/40)²: round-off of the sum
+    np.testing.assert_array_equal(after, cloud)
+    np.testing.assert_allclose(mean, cloud.mean(axis=1), rtol=1e-13, atol=1e-15)  # sum order only
+    assert np.all(runs["log"][3] < 2.0)
+
+
+@pytest.mark.parametrize("cls", FILTERS)
+def test_uniform_policy_never_flags_and_carries_on_with_equal_weights(cls):
+    """Run 1's weights all vanish at step 4 (its previous log-weights set to −∞ just before the
+    update: every product is zero, for any proposal). With ``vanished_weights: uniform`` no run
+    fails, the step is counted, run 1 carries on with equal weights and the other runs are
+    untouched; with the default the same run is flagged."""
+    model, x0, P0, u, z = linear_gaussian_problem(runs=3, steps=8)
+    seen = {}
+
+    def zero_weights_at_4(est, k):
+        if k == 4:
+            est.logw[1] = -np.inf
+        if k == 5:
+            seen["logw"] = est.logw.copy()
+
+    uniform = cls(model, particles=32, vanished_weights="uniform")
+    means, _, est = _run(uniform, x0, P0, u, z, [1, 2, 3], zero_weights_at_4)
+    assert not est.failed.any()
+    assert est.vanished_steps.tolist() == [0, 1, 0]
+    np.testing.assert_array_equal(seen["logw"][1], np.full(32, -np.log(32)))
+    assert np.isfinite(means).all()
+    ref, _, _ = _run(cls(model, particles=32), x0, P0, u, z, [1, 2, 3])
+    np.testing.assert_array_equal(means[:, [0, 2]], ref[:, [0, 2]])
+    _, _, flagged = _run(cls(model, particles=32), x0, P0, u, z, [1, 2, 3], zero_weights_at_4)
+    assert flagged.failed.tolist() == [False, True, False]
+
+
+@pytest.mark.parametrize(
+    ("cls", "digest"),
+    [
+        (BootstrapPF, "0b3e73398661b9fbf5438363b2c96534"),
+        (EKPF, "df41501359128d416ac9aca5f86bf4f8"),
+        (ILOPF, "b0645b9b6a20002d111b0d1f5c17e4f7"),
+        (UPF, "d26375f1ada6869740e6a7f5e12dc25c"),
+    ],
+)
+def test_default_options_give_the_numbers_of_the_filter_before_the_numerics_options(cls, digest):
+    """Bit-for-bit regression: SHA-256 (first 32 hex digits) of every step's mean and covariance
+    bytes, recorded with the code of commit 159f080 (before ``weights``, ``vanished_weights`` and
+    ``initial_cloud: uniform`` existed) on this problem and these generators."""
+    import hashlib
+
+    model, x0, P0, u, z = linear_gaussian_problem(runs=2, steps=6)
+    means, covs, _ = _run(cls(model, particles=16), x0, P0, u, z, [3, 4])
+    h = hashlib.sha256()
+    for m, c in zip(means, covs, strict=True):
+        h.update(m.tobytes())
+        h.update(c.tobytes())
+    assert h.hexdigest()[:32] == digest
+
+
+def test_uniform_initial_cloud_covers_the_range_whatever_x0():
+    """``initial_cloud: uniform`` on [−2, 3]: every coordinate inside, with the uniform's mean 0.5
+    and variance 25/12 within 5 standard errors (M = 2·4000 draws per coordinate), x0 ignored."""
+    model, x0, P0, _, _ = linear_gaussian_problem(runs=2, steps=1)
+    est = BootstrapPF(model, particles=4000, initial_cloud="uniform", initial_range=[-2.0, 3.0])
+    est.set_generators(_generators([1, 2]))
+    est.initialize(x0 + 100.0, P0)
+    x = est.x.reshape(-1, 4)
+    assert x.min() >= -2.0 and x.max() < 3.0
+    M, var = x.shape[0], 25.0 / 12.0
+    assert np.all(np.abs(x.mean(axis=0) - 0.5) < 5 * np.sqrt(var / M))
+    assert np.all(np.abs(x.var(axis=0) - var) < 5 * np.sqrt((625.0 / 80.0 - var**2) / M))  # Var(U²)-type: μ4 − σ⁴

@@ -24,7 +24,19 @@ Godsill & Andrieu 2000, "On sequential Monte Carlo sampling methods for Bayesian
 ``predict`` only records the input: the guided proposals need ``y_k``, so the whole step happens in
 ``update``. A run whose weights all vanish (every likelihood underflows, or every proposed
 particle lies outside the transition's support) is flagged with that reason and parked on its
-initial cloud, never a crash.
+initial cloud, never a crash (``vanished_weights: flag``, the default); with
+``vanished_weights: uniform`` it carries on with equal weights on the proposed cloud instead.
+
+Weights (``weights``): ``log``, the default, is the exact computation, normalised in the log
+domain (:func:`~quadest.numerics.resampling.normalise_log_weights`). ``linear_floor`` is the
+numerics of the public demo code of van der Merwe, Doucet, de Freitas & Wan (2000)
+(``demo_MC.m``): the likelihood gets an additive floor in the linear domain,
+``(p(y_k | x_k^i) + weight_floor) · p(x_k^i | x_{k−1}^i) / q(x_k^i)`` ("deal with
+ill-conditioning", floor 1e-99). When no particle explains ``y_k`` (every likelihood below the
+floor) the floor decides: the bootstrap filter's weights become equal and that step does not
+correct the cloud. We add the floor to the normalised density ``(2π)^(−m/2)|R|^(−1/2) exp(·)``;
+the demo's lacks the ``(2π)^(−1/2)``, which moves the threshold by that factor only. The sum is
+formed as ``logaddexp`` (the same number to rounding, without the demo's underflow of a product).
 
 Outputs besides the moments: :attr:`ess` (B,) of the last step before resampling,
 :attr:`ess_sum`, :attr:`resample_count` and :attr:`outside_support` (B,) over the run: the
@@ -36,8 +48,9 @@ not count as divergence.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import ClassVar
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -46,11 +59,27 @@ from quadest.estimators.base import Estimator
 from quadest.estimators.params import parameter_problem, ranged
 from quadest.models.base import FilterModel
 from quadest.numerics import psd_sqrt
-from quadest.numerics.resampling import check_scheme, effective_sample_size, normalise_log_weights, resample
+from quadest.numerics.resampling import (
+    RESAMPLING_SCHEMES,
+    check_scheme,
+    effective_sample_size,
+    normalise_log_weights,
+    resample,
+)
 
 SCHEDULES = ("every_step", "ess")
 ESTIMATES = ("weighted", "resampled")
-INITIAL_CLOUDS = ("sample", "point")
+INITIAL_CLOUDS = ("sample", "point", "uniform")
+WEIGHTS = ("log", "linear_floor")
+VANISHED_POLICIES = ("flag", "uniform")
+CHOICES = {
+    "resampling": RESAMPLING_SCHEMES,
+    "schedule": SCHEDULES,
+    "estimate": ESTIMATES,
+    "initial_cloud": INITIAL_CLOUDS,
+    "weights": WEIGHTS,
+    "vanished_weights": VANISHED_POLICIES,
+}
 
 
 @dataclass
@@ -65,6 +94,39 @@ class ParticleParams:
     estimate: str = "weighted"
     roughening: float = ranged(0.0, "roughening constant K (0: none)", ge=0.0)
     initial_cloud: str = "sample"
+    initial_range: list[float] = field(default_factory=lambda: [0.0, 1.0])
+    weights: str = "log"
+    weight_floor: float = ranged(1e-99, "additive floor of the likelihood (weights: linear_floor)", gt=0.0)
+    vanished_weights: str = "flag"
+
+    @staticmethod
+    def constraints(values: Mapping[str, Any], n: int) -> list[tuple[str, Any, str]]:
+        """The choice options and ``initial_range``, checked before any work."""
+        return particle_constraints(values)
+
+
+def range_problem(value: Any) -> str | None:
+    """Why ``value`` is not a valid ``initial_range`` ``[low, high]``, or ``None``."""
+    try:
+        low, high = (float(v) for v in value)
+    except (TypeError, ValueError):
+        return "a list [low, high] of two finite numbers with low < high"
+    if not (np.isfinite(low) and np.isfinite(high) and low < high):
+        return "a list [low, high] of two finite numbers with low < high"
+    return None
+
+
+def particle_constraints(values: Mapping[str, Any]) -> list[tuple[str, Any, str]]:
+    """``(key, value, allowed)`` for every choice option of :data:`CHOICES` outside its values
+    and a malformed ``initial_range``."""
+    problems = [
+        (key, values[key], f"one of {list(allowed)}")
+        for key, allowed in CHOICES.items()
+        if key in values and values[key] not in allowed
+    ]
+    if "initial_range" in values and (why := range_problem(values["initial_range"])) is not None:
+        problems.append(("initial_range", values["initial_range"], why))
+    return problems
 
 
 def one_of(key: str, value: str, allowed: tuple[str, ...]) -> None:
@@ -110,7 +172,15 @@ class ParticleFilter(Estimator):
         estimate: ``weighted`` (mean and covariance of the weighted cloud before resampling) or
             ``resampled`` (of the cloud after resampling).
         roughening: Gordon et al.'s constant K (0: none).
-        initial_cloud: ``sample`` (N draws from N(x0, P0)) or ``point`` (every particle at x0).
+        initial_cloud: ``sample`` (N draws from N(x0, P0)), ``point`` (every particle at x0) or
+            ``uniform`` (every coordinate uniform on ``initial_range``, whatever x0: seed 001,
+            §2.3 step 1, draws the particles on the state's value range, [0, 1] there).
+        initial_range: ``[low, high]`` of ``initial_cloud: uniform``.
+        weights: ``log`` (exact, log domain) or ``linear_floor`` (the UPF demo's likelihood
+            plus ``weight_floor``; see the module docstring).
+        weight_floor: the additive floor of ``linear_floor`` (> 0).
+        vanished_weights: when every weight of a run vanishes, ``flag`` the run (it is parked)
+            or fall back to ``uniform`` weights on the proposed cloud and carry on.
     """
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"random", "cloud"})
@@ -125,15 +195,28 @@ class ParticleFilter(Estimator):
         estimate: str = "weighted",
         roughening: float = 0.0,
         initial_cloud: str = "sample",
+        initial_range: Sequence[float] = (0.0, 1.0),
+        weights: str = "log",
+        weight_floor: float = 1e-99,
+        vanished_weights: str = "flag",
     ) -> None:
         super().__init__(model)
         check_ranges(
-            ParticleParams, {"particles": particles, "ess_threshold": ess_threshold, "roughening": roughening}, model.n
-        )
+            ParticleParams,
+            {
+                "particles": particles, "ess_threshold": ess_threshold, "roughening": roughening,
+                "weight_floor": weight_floor,
+            },
+            model.n,
+        )  # fmt: skip
         check_scheme(resampling)
         one_of("schedule", schedule, SCHEDULES)
         one_of("estimate", estimate, ESTIMATES)
         one_of("initial_cloud", initial_cloud, INITIAL_CLOUDS)
+        one_of("weights", weights, WEIGHTS)
+        one_of("vanished_weights", vanished_weights, VANISHED_POLICIES)
+        if (why := range_problem(initial_range)) is not None:
+            raise ConfigError("initial_range", list(initial_range), why)
         if model.sensors or model.n_err != model.n:
             raise ConfigError(
                 "model", model.name, "a model with vector states and one measurement (particle filters take no sensors)"
@@ -142,6 +225,9 @@ class ParticleFilter(Estimator):
         self._log_uniform = np.log(np.full(1, 1.0 / self.N))[0]  # log(1/N) as np.log(w) gives it
         self.resampling, self.schedule, self.ess_threshold = resampling, schedule, float(ess_threshold)
         self.estimate, self.roughening, self.initial_cloud = estimate, float(roughening), initial_cloud
+        self.initial_range = (float(initial_range[0]), float(initial_range[1]))
+        self.weights, self.vanished_weights = weights, vanished_weights
+        self.log_floor = float(np.log(weight_floor))
         self.particle_state: dict[str, np.ndarray] = {}
 
     # --- the hook subclasses override ---
@@ -173,6 +259,9 @@ class ParticleFilter(Estimator):
             L0 = np.stack([psd_sqrt(P, "P0") for P in P0])  # P0 may be singular (a state known exactly)
             eps = self._per_run(lambda rng: rng.standard_normal((self.N, n)))
             self.x = x0[:, None, :] + eps @ np.swapaxes(L0, -1, -2)
+        elif self.initial_cloud == "uniform":
+            low, high = self.initial_range
+            self.x = low + (high - low) * self._per_run(lambda rng: rng.random((self.N, n)))
         else:
             self.x = np.repeat(x0[:, None, :], self.N, axis=1)
         self.logw = np.full((B, self.N), -np.log(self.N))
@@ -182,17 +271,24 @@ class ParticleFilter(Estimator):
         self.ess_sum = np.zeros(B)
         self.resample_count = np.zeros(B, dtype=int)
         self.outside_support = np.zeros(B, dtype=int)
+        self.floored_steps = np.zeros(B, dtype=int)
+        self.vanished_steps = np.zeros(B, dtype=int)
         self.step = 0
         self._mean, self._cov = weighted_moments(self.x, np.exp(self.logw))
         self._safe = {"x": self.x.copy()}
 
     def diagnostics(self) -> dict[str, np.ndarray]:
-        """Per run: mean ESS over the steps, resampling count and proposals outside the
-        transition's support (the ``metrics.csv`` columns ``ess_mean``, ``resample_count``,
-        ``outside_support``)."""
+        """Per run: mean ESS over the steps, resampling count, proposals outside the
+        transition's support, steps at which no particle's likelihood exceeded ``weight_floor``
+        (where ``weights: linear_floor`` lets the floor decide) and steps at which every weight
+        vanished (the ``metrics.csv`` columns ``ess_mean``, ``resample_count``,
+        ``outside_support``, ``floored_steps``, ``vanished_steps``)."""
         with np.errstate(invalid="ignore", divide="ignore"):
             ess_mean = self.ess_sum / self.step
-        return {"ess_mean": ess_mean, "resample_count": self.resample_count, "outside_support": self.outside_support}
+        return {
+            "ess_mean": ess_mean, "resample_count": self.resample_count, "outside_support": self.outside_support,
+            "floored_steps": self.floored_steps, "vanished_steps": self.vanished_steps,
+        }  # fmt: skip
 
     def _save_safe_state(self) -> None:
         """Remember the initial per-particle arrays, to park failed runs on (call after filling
@@ -210,14 +306,18 @@ class ParticleFilter(Estimator):
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             x_new, log_q = self.propose(self._u_prev, z, u)
             incr = self.model.measurement_noise_logpdf(z[:, None, :] - self.model.h(x_new, u))
+            self.floored_steps += ~np.any(incr > self.log_floor, axis=1)
+            if self.weights == "linear_floor":
+                incr = np.logaddexp(incr, self.log_floor)
             if log_q is not None:
                 log_trans = self.model.process_noise_logpdf(x_new - self.model.f(x_prev, self._u_prev))
                 self.outside_support += np.sum(log_trans == -np.inf, axis=1)
                 incr = incr + log_trans - log_q
         self.log_increment = incr
         self.x = x_new
-        w, vanished = normalise_log_weights(self.logw + incr)
-        if vanished.any():
+        w, vanished = normalise_log_weights(self.logw + incr)  # vanished rows: equal weights
+        self.vanished_steps += vanished
+        if vanished.any() and self.vanished_weights == "flag":
             self.flag(np.flatnonzero(vanished), f"all particle weights vanished at step {self.step}")
         self.ess = effective_sample_size(w)
         self.ess_sum += self.ess

@@ -26,12 +26,14 @@ docs/particle-filters.md records these choices.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from quadest.estimators.params import ranged
-from quadest.estimators.particle import check_ranges, gather_particles, one_of
+from quadest.estimators.particle import check_ranges, gather_particles, one_of, particle_constraints
 from quadest.estimators.particle_ekpf import EKPF, EKPFParams
 from quadest.models.base import FilterModel
 from quadest.numerics.resampling import resample
@@ -48,6 +50,14 @@ class ILOPFParams(EKPFParams):
     threshold: float = ranged(1.0, "omega_Thr * N: the copy group has w >= threshold / N", gt=0.0)
     coefficient: str = "normal"
     coefficient_scale: float = ranged(1.0, "standard deviation (normal) or upper end (uniform) of rho", gt=0.0)
+
+    @staticmethod
+    def constraints(values: Mapping[str, Any], n: int) -> list[tuple[str, Any, str]]:
+        """The shared particle-filter choices plus ``coefficient``, checked before any work."""
+        problems = particle_constraints(values)
+        if "coefficient" in values and values["coefficient"] not in COEFFICIENT_LAWS:
+            problems.append(("coefficient", values["coefficient"], f"one of {list(COEFFICIENT_LAWS)}"))
+        return problems
 
 
 class ILOPF(EKPF):
