@@ -11,6 +11,7 @@ import yaml
 from quadest.aggregate.figures import figures
 from quadest.aggregate.statistics import paired_summary, tables, with_confidence_interval
 from quadest.aggregate.sweep import load_paired, load_sweep
+from quadest.aggregate.versus_best import heat_maps, run_scores, ut_parameter, versus_best
 from quadest.formatting import latex_table, markdown_table, strict_json
 
 
@@ -38,6 +39,15 @@ def aggregate(sweep_dir: Path) -> Path:
         if not paired.empty:
             paired.to_csv(out / "paired.csv", index=False)
             written.append(_write(paired_summary(paired, params), out, "paired_summary"))
+        if ut_parameter(params, "alpha"):
+            against_best = versus_best(run_scores(sweep_dir, jobs, params), params)
+            if not against_best.empty:
+                against_best.to_csv(out / "versus_best.csv", index=False)
+                counts = against_best.groupby(["estimator", "group"], sort=False).agg(
+                    cells=("job", "size"), differ_from_best=("differs", "sum")
+                )
+                written.append(_write(counts.reset_index(), out, "versus_best_counts"))
+                made += heat_maps(against_best, params, out / "figures")
     commits = sorted({c for c in jobs.get("commit", pd.Series(dtype=str)).dropna() if c})
     multirun = sweep_dir / "multirun.yaml"
     sweep_cfg = yaml.safe_load(multirun.read_text()) if multirun.is_file() else {}

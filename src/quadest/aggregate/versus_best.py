@@ -1,0 +1,160 @@
+"""Which cells of a sigma-point parameter sweep differ from the best cell beyond the paired 95 % CI.
+
+In a sweep over the UT parameters (α, β, κ) every cell with the same other settings (sensor
+level, scenario, ...) filters the same truth and measurements: the data do not depend on an
+estimator's parameters (docs/cache.md), so run ``i`` of two such cells is a paired sample. Such a
+set of cells is a *panel*. For each estimator, panel and state group (velocities, angle rates,
+angles, positions: the states sharing a unit), a run's score is the mean of its per-run RMSE over
+the group's states; the *best* cell has the smallest mean score, and every cell gets the paired
+difference to it, ``d_i = score_cell,i − score_best,i`` over the runs that diverged in neither, with
+the Student t 95 % interval of the mean difference, ``d̄ ± t_{0.975, n−1} s_d / √n``. A cell
+*differs* from the best when that interval lies above zero. Per-run differences below
+:data:`quadest.paired.ROUND_OFF` times the best score count as zero (filters equal in exact
+arithmetic differ at round-off, systematically: docs of :mod:`quadest.paired`). The intervals are
+per cell, not simultaneous over the grid: with many cells a few "differs" are expected by chance
+among cells that do not.
+
+Reads each job's ``metrics.csv`` (per-run RMSE), so it needs the job folders of the sweep; the
+aggregate writes ``versus_best.csv`` and one heat map per estimator and state group
+(``figures/versus_best_<estimator>_<group>.png``): α × β per κ (rows) and panel (columns), the
+mean score in colour, a dot on each cell that differs from its panel's best, a star on the best.
+An estimator whose cells all give the same scores (one that does not take the swept parameters,
+such as the EKF or a baseline at fixed parameters) is left out.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from scipy.stats import t as student_t
+
+from quadest.paired import CONFIDENCE, ROUND_OFF
+
+UT_PARAMETERS = ("alpha", "beta", "kappa")
+GROUPS = {"m/s": "velocities", "rad/s": "angle rates", "rad": "angles", "m": "positions"}
+
+
+def ut_parameter(params: list[str], name: str) -> str | None:
+    """The swept column whose last part is ``name`` (``sweep.alpha`` for ``alpha``), if any."""
+    return next((p for p in params if p.split(".")[-1] == name), None)
+
+
+def run_scores(sweep_dir: Path, jobs: pd.DataFrame, params: list[str]) -> pd.DataFrame:
+    """One row per job × estimator × state group × run: the run's mean RMSE over the group's
+    filter states and whether it diverged, with the swept parameters as columns."""
+    frames = []
+    for row in jobs[jobs["status"] == "ok"].to_dict("records"):
+        path = Path(sweep_dir) / str(row["job"]) / "metrics.csv"
+        if not path.is_file():
+            continue
+        metrics = pd.read_csv(path)
+        metrics = metrics[metrics["quantity"] == "filter"]
+        metrics = metrics.assign(group=metrics["unit"].map(lambda u: GROUPS.get(u, u)))
+        score = metrics.groupby(["estimator", "group", "run"], sort=False).agg(
+            score=("rmse", "mean"), diverged=("diverged", "any")
+        )
+        score = score.reset_index()
+        score["job"] = int(row["job"])
+        for key in params:
+            score[key] = row.get(key)
+        frames.append(score)
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def paired_interval(diff: np.ndarray) -> tuple[float, float, float]:
+    """Mean of the paired differences and its Student t interval at :data:`CONFIDENCE`."""
+    n = diff.size
+    if n < 2:
+        return (float(diff.mean()) if n else np.nan), np.nan, np.nan
+    half = student_t.ppf(0.5 + CONFIDENCE / 2, n - 1) * diff.std(ddof=1) / np.sqrt(n)
+    return float(diff.mean()), float(diff.mean() - half), float(diff.mean() + half)
+
+
+def versus_best(scores: pd.DataFrame, params: list[str]) -> pd.DataFrame:
+    """Per job, estimator and state group: the mean score, the panel's best job, the paired
+    difference to it with its 95 % CI, and ``differs`` (see the module docstring)."""
+    if scores.empty:
+        return pd.DataFrame()
+    panel = [p for p in params if p.split(".")[-1] not in UT_PARAMETERS]
+    rows = []
+    for keys, part in scores.groupby(["estimator", "group", *panel], sort=False, dropna=False):
+        wide = part.pivot_table(index="run", columns="job", values="score", sort=False)
+        failed = part.pivot_table(index="run", columns="job", values="diverged", aggfunc="any", sort=False)
+        means = wide.where(~failed.astype(bool)).mean()
+        if np.ptp(means.to_numpy()) == 0.0:
+            continue  # the estimator does not depend on the swept parameters (the EKF, a fixed baseline)
+        best = int(means.idxmin())
+        for job in wide.columns:
+            keep = ~(failed[job].astype(bool) | failed[best].astype(bool))
+            diff = (wide[job] - wide[best])[keep].to_numpy()
+            diff = np.where(np.abs(diff) < ROUND_OFF * wide[best][keep].to_numpy(), 0.0, diff)
+            mean, low, high = paired_interval(diff)
+            cell = part[part["job"] == job].iloc[0]
+            rows.append(
+                {
+                    "job": int(job),
+                    **{key: cell[key] for key in params},
+                    "estimator": keys[0],
+                    "group": keys[1],
+                    "runs": int(keep.sum()),
+                    "score_mean": float(means[job]),
+                    "best_job": best,
+                    "diff_mean": mean,
+                    "diff_ci_low": low,
+                    "diff_ci_high": high,
+                    "differs": bool(low > 0),
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def heat_maps(table: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
+    """One α × β heat map per estimator and state group (rows: κ; columns: panels)."""
+    alpha, beta, kappa = (ut_parameter(params, name) for name in UT_PARAMETERS)
+    if table.empty or not (alpha and beta):
+        return []
+    panel = [p for p in params if p.split(".")[-1] not in UT_PARAMETERS]
+    made = []
+    for (est, group), part in table.groupby(["estimator", "group"], sort=False):
+        kappas = sorted(part[kappa].unique()) if kappa else [None]
+        panels = list(part[panel].drop_duplicates().itertuples(index=False)) if panel else [()]
+        fig, axes = plt.subplots(
+            len(kappas), len(panels), figsize=(3.4 * len(panels), 2.8 * len(kappas)), squeeze=False
+        )
+        for c, values in enumerate(panels):
+            sel = part
+            for key, value in zip(panel, values, strict=True):
+                sel = sel[sel[key] == value]
+            for r, kv in enumerate(kappas):
+                cells = sel if kv is None else sel[sel[kappa] == kv]
+                grid = cells.pivot_table(index=beta, columns=alpha, values="score_mean")
+                differs = cells.pivot_table(index=beta, columns=alpha, values="differs", aggfunc="any")
+                is_best = cells.assign(b=cells["job"] == cells["best_job"]).pivot_table(
+                    index=beta, columns=alpha, values="b", aggfunc="any"
+                )
+                ax = axes[r, c]
+                im = ax.imshow(grid.to_numpy(), aspect="auto", origin="lower", cmap="viridis")
+                ys, xs = np.nonzero(differs.reindex_like(grid).fillna(False).to_numpy().astype(bool))
+                ax.plot(xs, ys, "w.", ms=4)
+                ys, xs = np.nonzero(is_best.reindex_like(grid).fillna(False).to_numpy().astype(bool))
+                ax.plot(xs, ys, "r*", ms=8)
+                ax.set_xticks(range(grid.shape[1]), [f"{a:g}" for a in grid.columns], fontsize=6, rotation=90)
+                ax.set_yticks(range(grid.shape[0]), [f"{b:g}" for b in grid.index], fontsize=6)
+                ax.set_xlabel("α", fontsize=8)
+                ax.set_ylabel("β", fontsize=8)
+                title = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(panel, values, strict=True))
+                ax.set_title(title + (f", κ={kv:g}" if kv is not None else ""), fontsize=7)
+                fig.colorbar(im, ax=ax)
+        fig.suptitle(f"{est}, {group}: mean RMSE; • differs from ★ (paired 95 % CI)", fontsize=9)
+        fig.tight_layout()
+        path = out / f"versus_best_{est}_{group.replace(' ', '_')}.png"
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        made.append(path)
+    return made
