@@ -1,5 +1,7 @@
 """Shared square-root numerics against independent references (numpy Cholesky, filterpy's
-sigma points), as hypothesis property tests over random well-conditioned cases."""
+sigma points), as hypothesis property tests over random well-conditioned cases. Every test runs
+on both backends of the square-root numerics (``QUADEST_KERNELS``: the compiled kernels and the
+numpy references)."""
 
 from __future__ import annotations
 
@@ -14,6 +16,15 @@ from quadest.numerics import cholupdate, kalman_gain, qr_factor, ut_weights, whi
 from quadest.numerics.rules import UnscentedRule, rule_mean
 
 PROPERTY = settings(max_examples=1000, deadline=None)
+
+
+@pytest.fixture(scope="module", autouse=True, params=["numba", "numpy"])
+def kernels(request):
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("QUADEST_KERNELS", request.param)
+        yield request.param
+
+
 cases = st.tuples(st.integers(0, 2**32 - 1), st.sampled_from([1, 4]), st.integers(1, 7))
 
 

@@ -15,6 +15,7 @@ from quadest.errors import ConfigError
 from quadest.estimators.params import parameter_problem
 from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
 from quadest.models.registry import model_specs, state_dimension
+from quadest.numerics.square_root import requested_kernels
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import validate_replay
 from quadest.sensors.noise_laws import check_noise_law
@@ -34,6 +35,7 @@ def validate_run(cfg) -> None:
         raise ConfigError("workers", cfg.workers, "must be >= 0 (0: one process per estimator, up to the CPU count)")
     if cfg.output.saved_runs < 0:
         raise ConfigError("output.saved_runs", cfg.output.saved_runs, "must be >= 0")
+    requested_kernels()  # QUADEST_KERNELS, the backend of the square-root numerics (docs/benchmarks.md)
 
 
 def validate_model(cfg) -> None:

@@ -9,17 +9,136 @@ positive diagonal, so that ``P = S @ S.T`` for each run.
   vector, applied column by column for a matrix ``u``. A downdate that would make the matrix
   indefinite raises :class:`~quadest.errors.DowndateError` naming the failed runs.
 - :func:`kalman_gain` is eq. 5.26: ``K = (Pxy / Syᵀ) / Sy``, two triangular solves.
+
+Two backends compute them. The ``*_numpy`` functions below are the readable references, batched
+numpy with the equation tags. The compiled kernels of :mod:`quadest.numerics.compiled` (numba) do
+the same arithmetic one small matrix at a time, which at B = 1000 is several times faster than
+numpy's per-call overhead allows. The public functions use the compiled kernels when numba imports
+and the environment variable ``QUADEST_KERNELS`` is ``numba`` (the default) and the numpy
+references when it is ``numpy`` (docs/benchmarks.md). Both agree to round-off (tests/test_kernels.py).
 """
 
 from __future__ import annotations
 
+import os
+from functools import cache
+from types import ModuleType
+
 import numpy as np
 
-from quadest.errors import DowndateError
+from quadest.errors import ConfigError, DowndateError
+
+KERNELS_ENV = "QUADEST_KERNELS"
+KERNEL_BACKENDS = ("numba", "numpy")
+
+
+@cache
+def _compiled() -> ModuleType | None:
+    """The compiled kernels, or ``None`` when numba cannot be imported."""
+    try:
+        from quadest.numerics import compiled
+    except ImportError:
+        return None
+    return compiled
+
+
+def requested_kernels() -> str:
+    """``$QUADEST_KERNELS``, ``numba`` when unset; checked without importing numba.
+
+    Raises:
+        ConfigError: for a value other than ``numba`` or ``numpy``.
+    """
+    value = os.environ.get(KERNELS_ENV, "numba")
+    if value not in KERNEL_BACKENDS:
+        raise ConfigError(KERNELS_ENV, value, f"allowed values are {', '.join(KERNEL_BACKENDS)}")
+    return value
+
+
+def kernel_backend() -> str:
+    """The backend of the square-root numerics: :func:`requested_kernels`, or ``numpy`` when numba
+    is asked for but cannot be imported."""
+    value = requested_kernels()
+    if value == "numba" and _compiled() is None:
+        return "numpy"
+    return value
+
+
+def _kernels() -> ModuleType | None:
+    """The compiled kernels when the backend is ``numba``, else ``None``."""
+    return _compiled() if kernel_backend() == "numba" else None
+
+
+def _as_batch(a: np.ndarray, core: int) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array with one leading batch axis before ``core`` axes."""
+    return np.ascontiguousarray(a, dtype=float).reshape((-1, *a.shape[a.ndim - core :]))
 
 
 def qr_factor(A: np.ndarray) -> np.ndarray:
-    """Lower-triangular factor ``S`` with positive diagonal such that ``S Sᵀ = A Aᵀ``.
+    """Lower-triangular factor ``S`` with positive diagonal such that ``S Sᵀ = A Aᵀ`` (the thesis's
+    ``qr{A}``, eqs 5.18, 5.23), for ``A`` of shape (…, n, L) with L ≥ n; see :func:`qr_factor_numpy`."""
+    kernels = _kernels()
+    A = np.asarray(A, dtype=float)
+    if kernels is None or A.ndim < 2 or A.size == 0:
+        return qr_factor_numpy(A)
+    n, L = A.shape[-2:]
+    if L < n:
+        raise ValueError(f"qr_factor needs at least as many columns as rows, got A of shape {A.shape}")
+    out = np.empty((*A.shape[:-1], n))
+    kernels.qr_factor_kernel(_as_batch(A, 2), out.reshape(-1, n, n))
+    return out
+
+
+def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
+    """Cholesky factor of ``S Sᵀ + ν u uᵀ`` (eqs 5.19, 5.24, 5.29); see :func:`cholupdate_numpy`
+    for the shapes and the :class:`~quadest.errors.DowndateError` raised for failed runs."""
+    kernels = _kernels()
+    S = np.asarray(S, dtype=float)
+    if kernels is None or S.ndim != 3 or S.size == 0:
+        return cholupdate_numpy(S, u, nu)
+    x = np.asarray(u, dtype=float)
+    if x.ndim == S.ndim - 1:
+        x = x[..., None]
+    if x.shape[:-1] != S.shape[:-1]:
+        raise ValueError(f"cholupdate: u of shape {np.shape(u)} does not fit S of shape {S.shape}")
+    S = np.ascontiguousarray(S)
+    out = np.empty_like(S)
+    failed = np.zeros(S.shape[0], dtype=bool)
+    kernels.cholupdate_kernel(S, np.ascontiguousarray(x), float(np.sqrt(abs(nu))), bool(nu < 0), out, failed)
+    if failed.any():
+        _raise_downdate_error(out, failed)
+    return out
+
+
+def kalman_gain(Pxy: np.ndarray, Sy: np.ndarray) -> np.ndarray:
+    """Kalman gain ``K = Pxy (Sy Syᵀ)⁻¹`` by two triangular solves (eq. 5.26); see :func:`kalman_gain_numpy`."""
+    kernels = _kernels()
+    Pxy, Sy = np.asarray(Pxy, dtype=float), np.asarray(Sy, dtype=float)
+    if kernels is None or Pxy.ndim != 3 or Sy.shape != (Pxy.shape[0], Pxy.shape[2], Pxy.shape[2]):
+        return kalman_gain_numpy(Pxy, Sy)
+    K = np.empty_like(Pxy, order="C")
+    kernels.kalman_gain_kernel(np.ascontiguousarray(Pxy), np.ascontiguousarray(Sy), K)
+    return K
+
+
+def whiten(S: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``S⁻¹ r`` for lower-triangular ``S`` (B, m, m) and vectors ``r`` (B, m); see :func:`whiten_numpy`."""
+    kernels = _kernels()
+    S, r = np.asarray(S, dtype=float), np.asarray(r, dtype=float)
+    if kernels is None or r.ndim != 2 or S.shape != (*r.shape, r.shape[1]):
+        return whiten_numpy(S, r)
+    out = np.empty_like(r, order="C")
+    kernels.whiten_kernel(np.ascontiguousarray(S), np.ascontiguousarray(r), out)
+    return out
+
+
+def _raise_downdate_error(result: np.ndarray, failed: np.ndarray) -> None:
+    err = DowndateError("Cholesky downdate would make the covariance indefinite", np.flatnonzero(failed))
+    err.result = result
+    raise err
+
+
+def qr_factor_numpy(A: np.ndarray) -> np.ndarray:
+    """Lower-triangular factor ``S`` with positive diagonal such that ``S Sᵀ = A Aᵀ`` (numpy reference).
 
     ``A`` has shape (B, n, L) with L ≥ n. The thesis writes this ``qr{A}`` (eqs 5.18, 5.23):
     factorise ``Aᵀ = Q R``; then ``A Aᵀ = Rᵀ R``. NumPy's ``R`` may carry negative diagonal
@@ -36,8 +155,8 @@ def qr_factor(A: np.ndarray) -> np.ndarray:
     return np.swapaxes(R * signs[..., :, None], -1, -2)
 
 
-def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
-    """Cholesky factor of ``S Sᵀ + ν u uᵀ`` (an update for ν > 0, a downdate for ν < 0).
+def cholupdate_numpy(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
+    """Cholesky factor of ``S Sᵀ + ν u uᵀ``, an update for ν > 0, a downdate for ν < 0 (numpy reference).
 
     Shapes: ``S`` (B, n, n) lower triangular with a positive diagonal; ``u`` (B, n) for a rank-one
     change or (B, n, k) for ``k`` sequential rank-one changes, one per column (eq. 5.29). The input
@@ -91,9 +210,7 @@ def cholupdate(S: np.ndarray, u: np.ndarray, nu: float) -> np.ndarray:
     if failed.any():
         L = np.array(L)
         L[failed] = S[failed]
-        err = DowndateError("Cholesky downdate would make the covariance indefinite", np.flatnonzero(failed))
-        err.result = L
-        raise err
+        _raise_downdate_error(L, failed)
     return np.ascontiguousarray(L)
 
 
@@ -154,8 +271,8 @@ def _solve_upper_transposed(L: np.ndarray, b: np.ndarray) -> np.ndarray:
     return y
 
 
-def kalman_gain(Pxy: np.ndarray, Sy: np.ndarray) -> np.ndarray:
-    """Kalman gain ``K = Pxy (Sy Syᵀ)⁻¹`` by two triangular solves (thesis eq. 5.26).
+def kalman_gain_numpy(Pxy: np.ndarray, Sy: np.ndarray) -> np.ndarray:
+    """Kalman gain ``K = Pxy (Sy Syᵀ)⁻¹`` by two triangular solves (thesis eq. 5.26; numpy reference).
 
     ``Pxy`` is (B, n, m) and ``Sy`` the lower factor (B, m, m) of the innovation covariance.
     ``K Sy Syᵀ = Pxy`` is solved as ``Sy A = Pxyᵀ`` (forward) then ``Syᵀ Kᵀ = A`` (backward);
@@ -165,8 +282,8 @@ def kalman_gain(Pxy: np.ndarray, Sy: np.ndarray) -> np.ndarray:
     return np.swapaxes(_solve_upper_transposed(Sy, A), -1, -2)
 
 
-def whiten(S: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """``S⁻¹ r`` for lower-triangular ``S`` (B, m, m) and vectors ``r`` (B, m).
+def whiten_numpy(S: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``S⁻¹ r`` for lower-triangular ``S`` (B, m, m) and vectors ``r`` (B, m) (numpy reference).
 
     ``|S⁻¹ r|²`` is the Mahalanobis form ``rᵀ (S Sᵀ)⁻¹ r`` used for NEES and NIS.
     """
