@@ -1,16 +1,19 @@
 """Seed 004's ranking table (``python -m quadest.aggregate.ranking``) on a hand-made metrics table
 whose answers are known: the 3-D RMSE is the root of the summed squares of the axes, a step with
-a large consistent difference holds (or is reversed), a step with no difference is not shown."""
+a large consistent difference holds (or is reversed), a step with no difference is not shown; the
+step-time ratio's geometric mean and Student-t interval over jobs, by hand."""
 
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
-from quadest.aggregate.ranking import grouped_metrics, main, ranking_lines
+from quadest.aggregate.ranking import grouped_metrics, main, ranking_lines, step_time_ratios
 
 RUNS = 30
 STATES = ("x", "y", "z", "vx", "vy", "vz", "error_angle")
+TIME = {"mekf": 40.0, "hckf": 1000.0, "hf": 60.0, "hhcf": 1100.0}
 
 
 def _metrics() -> pd.DataFrame:
@@ -21,7 +24,7 @@ def _metrics() -> pd.DataFrame:
     scale = {"mekf": base, "hckf": 1.1 * base, "hf": 1.1 * base * wobble, "hhcf": 0.99 * base * wobble}
     rows = [
         dict(estimator=est, run=run, state=state, unit="-", quantity="filter", rmse=s[run] * (1 + i), diverged=False,
-             seed=7)
+             seed=7, step_time_us=TIME[est])
         for est, s in scale.items() for run in range(RUNS) for i, state in enumerate(STATES)
     ]  # fmt: skip
     return pd.DataFrame(rows)
@@ -46,5 +49,26 @@ def test_verdicts_follow_the_sign_and_the_holm_corrected_test(tmp_path):
     assert not any("srukf" in key[0] for key in verdict)  # steps whose filters are absent are left out
     _metrics().to_csv(tmp_path / "metrics.csv", index=False)
     assert main([str(tmp_path)]) == 0
-    assert (tmp_path / "ranking.md").read_text().splitlines() == lines
+    assert (tmp_path / "ranking.md").read_text().splitlines()[: len(lines)] == lines
+    ratios = pd.read_csv(tmp_path / "step_time.csv").set_index("estimator")
+    assert ratios.loc["hhcf", "ratio"] == 1.1 and ratios.loc["hhcf", "jobs"] == 1
+    assert np.isnan(ratios.loc["hhcf", "rel_ci_low"])  # one job: no interval
+    assert len(pd.read_csv(tmp_path / "paired_grouped.csv")) == 6 * 3  # 4 estimators: 6 pairs x 3 states
     assert main([str(tmp_path / "missing")]) == 2
+
+
+def test_step_time_ratio_is_the_geometric_mean_with_a_t_interval_over_jobs():
+    """Ratios 1.0, 1.1, 1.3 over three jobs: geometric mean (1.43)^(1/3) and the 95 % t interval
+    of the mean log ratio (2 degrees of freedom); a pair with a missing estimator is left out."""
+    ratios = np.array([1.0, 1.1, 1.3])
+    times = pd.DataFrame(
+        [{"job": j, "estimator": "hckf", "step_time_us": 200.0 * (j + 1)} for j in range(3)]
+        + [{"job": j, "estimator": "hhcf", "step_time_us": 200.0 * (j + 1) * r} for j, r in enumerate(ratios)]
+    )
+    row = step_time_ratios(times).set_index("estimator").loc["hhcf"]
+    logs = np.log(ratios)
+    half = stats.t.ppf(0.975, 2) * logs.std(ddof=1) / np.sqrt(3)
+    assert row["jobs"] == 3 and np.isclose(row["ratio"], 1.43 ** (1 / 3), rtol=1e-14)
+    np.testing.assert_allclose([row["ratio_ci_low"], row["ratio_ci_high"]], np.exp(logs.mean() + [-half, half]))
+    np.testing.assert_allclose(row["rel_diff"], row["ratio"] - 1.0, rtol=0, atol=1e-15)
+    assert list(step_time_ratios(times)["estimator"]) == ["hhcf"]

@@ -1,5 +1,5 @@
 """The Huber measurement update (quadest.numerics.huber) and the robust filters built on it: hf,
-hckf, hhcf and ``robust: true`` on every sigma-point filter (srukf, ckf, srckf, ckf5, srckf5, cdkf,
+huber_ckf, hhcf and ``robust: true`` on every sigma-point filter (srukf, ckf, srckf, ckf5, srckf5, cdkf,
 srcdkf, dd1, ghkf).
 
 - As γ → ∞ each Huber filter is its parent: bit for bit for the sigma-point filters (no residual
@@ -27,7 +27,7 @@ from quadest.estimators.divided_difference import DD1
 from quadest.estimators.extended import HuberEKF
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
 from quadest.estimators.gauss_hermite import GHKF
-from quadest.estimators.huber import HCKF, HHCF
+from quadest.estimators.huber import HHCF, HuberCKF
 from quadest.estimators.srukf import SRUKF
 from quadest.models.base import MeasurementModel
 from quadest.models.functional import LinearGaussianModel
@@ -40,7 +40,7 @@ INF = 1e12  # γ beyond any whitened residual
 FAMILY = {"ckf": CKF, "srckf": SRCKF, "ckf5": CKF5, "srckf5": SRCKF5, "cdkf": CDKF, "srcdkf": SRCDKF, "dd1": DD1,
           "ghkf": GHKF, "srukf": SRUKF}  # fmt: skip
 PAIRS = {  # Huber filter and its parent
-    "hckf": (lambda m: HCKF(m, huber_threshold=INF), CKF),
+    "huber_ckf": (lambda m: HuberCKF(m, huber_threshold=INF), CKF),
     "hhcf": (lambda m: HHCF(m, huber_threshold=INF), CKF5),
     **{name: (lambda m, c=cls: c(m, robust=True, huber_threshold=INF), cls) for name, cls in FAMILY.items()},
 }
@@ -110,7 +110,7 @@ def _rlm(R: np.ndarray, P: np.ndarray, H: np.ndarray, nu: np.ndarray, gamma: flo
 
 
 ROBUST = {
-    "hckf": lambda m, **kw: HCKF(m, **kw),
+    "huber_ckf": lambda m, **kw: HuberCKF(m, **kw),
     "hhcf": lambda m, **kw: HHCF(m, **kw),
     "hf": lambda m, **kw: HuberEKF(m, **kw),
     **{name: (lambda m, c=cls, **kw: c(m, robust=True, **kw)) for name, cls in FAMILY.items()},
@@ -133,12 +133,12 @@ def test_a_filters_huber_update_is_the_m_estimate_and_its_covariance(make):
     assert est.diagnostics()["huber_robust_fraction"][0] == 1.0
 
 
-def test_hckf_is_the_ckf_with_robust_true():
+def test_huber_ckf_is_the_ckf_with_robust_true():
     model = _constant_velocity(2)
     rng = np.random.default_rng(8)
     z = rng.standard_normal((2, 40, 2)) * np.where(rng.random((2, 40, 1)) < 0.2, 10.0, 0.5)
     P0 = np.broadcast_to(np.eye(4), (2, 4, 4))
-    a = run_filter(HCKF(model, huber_threshold=2.0), model, np.zeros((2, 4)), P0, np.zeros((2, 40, 0)), z)
+    a = run_filter(HuberCKF(model, huber_threshold=2.0), model, np.zeros((2, 4)), P0, np.zeros((2, 40, 0)), z)
     b = run_filter(CKF(model, robust=True, huber_threshold=2.0), model, np.zeros((2, 4)), P0, np.zeros((2, 40, 0)), z)
     for got, ref in zip(a, b, strict=True):
         assert np.array_equal(got, ref)
@@ -195,13 +195,13 @@ def _relative_difference(huber_rmse, parent_rmse):
 
 
 LINEAR_PAIRS = [
-    (lambda m: HCKF(m), CKF),
+    (lambda m: HuberCKF(m), CKF),
     (lambda m: SRUKF(m, robust=True), SRUKF),
     (lambda m: HuberEKF(m), BatchedFilterpyEKF),
 ]
 
 
-@pytest.mark.parametrize("pair", LINEAR_PAIRS, ids=["hckf", "srukf", "hf"])
+@pytest.mark.parametrize("pair", LINEAR_PAIRS, ids=["huber_ckf", "srukf", "hf"])
 def test_huber_costs_a_few_percent_under_gaussian_noise_and_pays_under_outliers(pair):
     huber, parent = pair
     rel, se = _relative_difference(*_paired_rmse(huber, parent, NoiseLaw("gaussian")))
@@ -216,7 +216,7 @@ def test_huber_costs_a_few_percent_under_gaussian_noise_and_pays_under_outliers(
 
 def test_huber_iterations_reach_the_diagnostics():
     model = _constant_velocity(5)
-    est = HCKF(model, huber_max_iterations=7)
+    est = HuberCKF(model, huber_max_iterations=7)
     law = NoiseLaw("contaminated", epsilon=0.2, variance_factor=100.0)
     z = np.stack([draw_noise(law, np.random.default_rng([3, i]), (80, 2), 0.5) for i in range(5)])
     run_filter(est, model, np.zeros((5, 4)), np.broadcast_to(np.eye(4), (5, 4, 4)), np.zeros((5, 80, 0)), z)
@@ -230,12 +230,12 @@ def test_huber_iterations_reach_the_diagnostics():
 @pytest.mark.parametrize(
     ("override", "key"),
     [
-        ("estimator.hckf.huber_threshold=0", "estimator.hckf.huber_threshold"),
-        ("estimator.hckf.huber_max_iterations=0", "estimator.hckf.huber_max_iterations"),
-        ("estimator.hckf.huber_tolerance=-1", "estimator.hckf.huber_tolerance"),
+        ("estimator.huber_ckf.huber_threshold=0", "estimator.huber_ckf.huber_threshold"),
+        ("estimator.huber_ckf.huber_max_iterations=0", "estimator.huber_ckf.huber_max_iterations"),
+        ("estimator.huber_ckf.huber_tolerance=-1", "estimator.huber_ckf.huber_tolerance"),
     ],
 )
 def test_bad_huber_settings_are_one_config_error(override, key):
     with pytest.raises(ConfigError) as err:
-        validate(compose_config(["estimator=[hckf]", override]))
+        validate(compose_config(["estimator=[huber_ckf]", override]))
     assert err.value.key == key

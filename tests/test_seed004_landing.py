@@ -1,6 +1,7 @@
 """``experiment=seed004_landing`` (docs/seed004-landing.md): the approach onto the moving platform,
-the beacons carried by the platform, the experiment's configuration and a tiny run of every
-estimator it compares."""
+the beacons carried by the platform, the experiment's configuration, the seed's filter names
+(``hckf`` is ``ckf5`` bit for bit, ``hf`` is the experiment's EKF plus the Huber update) and a tiny
+run of every estimator it compares."""
 
 from __future__ import annotations
 
@@ -94,10 +95,10 @@ def test_moving_platform_jacobian_matches_finite_differences():
 
 
 def test_the_truth_camera_and_the_filters_camera_see_the_same_platform():
-    """With (almost) no pixel noise, each available frame equals the filters' ``h`` at the true
+    """With (almost) no camera noise, each available frame equals the filters' ``h`` at the true
     state and the input's platform position: the truth and the filters put the beacons at the same
-    place (a sign or frame slip on either side moves them by metres, i.e. pixels)."""
-    cfg = compose_config([EXPERIMENT, "runs=2", "duration=1.0", "sensor.vision.pixel_noise=1e-9"])
+    place (a sign or frame slip on either side turns the lines of sight by whole degrees)."""
+    cfg = compose_config([EXPERIMENT, "runs=2", "duration=1.0", "sensor.vision.los_noise=1e-12"])
     validate(cfg)
     data = build_data(cfg)
     record, model = data.sensors["vision"], data.model
@@ -106,7 +107,7 @@ def test_the_truth_camera_and_the_filters_camera_see_the_same_platform():
     np.testing.assert_array_equal(frames, np.arange(0, data.time.size, 5))  # 20 Hz, every beacon in view
     for k in frames[:5]:
         predicted = model.aiding["vision"].h(data.truth[:, k, None], data.inputs[:, k])[:, 0]
-        np.testing.assert_allclose(record.values[:, k], predicted, atol=1e-6)
+        np.testing.assert_allclose(record.values[:, k], predicted, atol=1e-10)
 
 
 def test_the_experiment_composes_validates_and_carries_the_seed_settings():
@@ -123,8 +124,10 @@ def test_the_experiment_composes_validates_and_carries_the_seed_settings():
     law = s.vision.noise_law
     assert (law.kind, law.epsilon, law.variance_factor) == ("contaminated", 0.1, 5.0)
     assert len(s.vision.beacons) == 8 and list(cfg.model.aiding) == ["vision"]
-    assert set(cfg.estimator) == {"mekf", "hf", "ckf", "hckf", "hhcf", "srukf", "srukf_huber"}
-    assert cfg.estimator.srukf_huber.robust and not cfg.estimator.srukf.robust
+    assert s.vision.kind == "line_of_sight"
+    assert set(cfg.estimator) == {"mekf", "hf", "hckf", "hhcf", "ckf", "huber_ckf"}
+    assert (cfg.estimator.hckf.kind, cfg.estimator.hhcf.kind) == ("hckf", "hhcf")
+    assert "robust" not in cfg.estimator.hckf and not cfg.estimator.mekf.reset_jacobian
     assert isinstance(scenario(cfg.scenario), PlatformApproach)
 
 
@@ -141,3 +144,39 @@ def test_a_tiny_run_finishes_with_every_estimator():
         result = run_estimator(label, build_estimator(label, node, data.model), data, 1e6)
         assert not result.diverged.any(), (label, result.reasons)
         assert np.isfinite(result.sq_error_sum).all(), label
+
+
+@pytest.fixture(scope="module")
+def tiny_data():
+    """Two runs of 0.5 s of the experiment (line of sight, contaminated noise)."""
+    return build_data(compose_config([EXPERIMENT, "runs=2", "duration=0.5"]))
+
+
+def _run(name: str, data, **params):
+    return run_estimator(name, build_estimator(name, params, data.model), data, 1e6)
+
+
+def test_hckf_is_the_plain_fifth_degree_cubature_filter_bit_for_bit(tiny_data):
+    """Seed 004's HCKF is ``ckf5`` under the seed's name: the same estimates, covariances and NEES,
+    bit for bit (and not the Huber filter: ``hhcf`` differs under the contaminated noise)."""
+    hckf, ckf5, hhcf = (_run(name, tiny_data) for name in ("hckf", "ckf5", "hhcf"))
+    assert np.array_equal(hckf.sq_error_sum, ckf5.sq_error_sum)
+    assert np.array_equal(hckf.nees_mean_t, ckf5.nees_mean_t, equal_nan=True)  # step 0 has no NEES: NaN in both
+    assert not np.array_equal(hckf.sq_error_sum, hhcf.sq_error_sum)
+
+
+def test_hckf_takes_no_huber_keys():
+    """The seed's HCKF is never robust: a ``robust`` key is refused with one line naming it (the
+    robust fifth-degree filter is ``hhcf``)."""
+    with pytest.raises(ConfigError, match=r"estimator\.hckf\.robust.*allowed keys: augmented, kind"):
+        validate(compose_config([EXPERIMENT, "+estimator.hckf.robust=true"]))
+
+
+def test_hf_is_the_experiments_ekf_plus_the_huber_update(tiny_data):
+    """With γ beyond any whitened residual ``hf`` keeps every Kalman update: it is the experiment's
+    EKF (``mekf`` with ``reset_jacobian: false``) up to round-off (the two code paths solve the gain
+    differently: relative 1e-9 after 50 steps), so HF vs EKF isolates the Huber update."""
+    ekf = _run("mekf", tiny_data, reset_jacobian=False)
+    hf = _run("hf", tiny_data, huber_threshold=1e12)
+    np.testing.assert_allclose(hf.sq_error_sum, ekf.sq_error_sum, rtol=1e-9)
+    assert not np.allclose(_run("hf", tiny_data).sq_error_sum, ekf.sq_error_sum, rtol=1e-6)

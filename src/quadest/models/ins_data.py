@@ -108,7 +108,7 @@ def _validate_vision(v, sample_period: float) -> None:
         raise ConfigError("sensor.vision.kind", v.kind, f"one of {list(KINDS)}")
     if v.mount not in MOUNTS:
         raise ConfigError("sensor.vision.mount", v.mount, f"one of {list(MOUNTS)}")
-    for key in ("pixel_noise", "bearing_noise", "focal_length", "max_range"):
+    for key in ("pixel_noise", "bearing_noise", "los_noise", "focal_length", "max_range"):
         require_positive(f"sensor.vision.{key}", v[key])
     for key in ("misalignment", "focal_scale"):
         require_non_negative(f"sensor.vision.{key}", v[key])

@@ -89,8 +89,9 @@ class BarometerAiding(AidingSensor):
 
 @dataclass
 class VisionAiding(AidingSensor):
-    """Beacon pixels or bearings through the nominal camera (:mod:`quadest.sensors.vision`):
-    ``r_c = C_cb R(q)ᵀ (b − p)``, so ``∂r_c/∂δθ = C_cb [r_b]×`` and ``∂r_c/∂δp = −C_cb R(q)ᵀ``.
+    """Beacon pixels, bearings or unit line-of-sight vectors through the nominal camera
+    (:mod:`quadest.sensors.vision`): ``r_c = C_cb R(q)ᵀ (b − p)``, so ``∂r_c/∂δθ = C_cb [r_b]×``
+    and ``∂r_c/∂δp = −C_cb R(q)ᵀ``, chained with the kind's ``∂ project/∂r_c``.
 
     With ``moving_platform`` the beacons ``b`` are in the frame of a platform that translates
     without rotating, and the input carries its known position ``p_P = u[6:9]`` (seed 004 links the
@@ -127,7 +128,7 @@ class VisionAiding(AidingSensor):
         R_q = quat.rotation_matrix(q)
         r_b = np.einsum("bji,bnj->bni", R_q, self.spec.beacon_array - p[:, None, :])
         r_c = np.einsum("ij,bnj->bni", self.C_cb, r_b)
-        D = projection_jacobian(r_c, self.spec.kind, self.spec.focal_length) @ self.C_cb  # (B, N, 2, 3)
+        D = projection_jacobian(r_c, self.spec.kind, self.spec.focal_length) @ self.C_cb  # (B, N, rows, 3)
         J = self._zeros(x)
         J[:, :, 0:3] = (D @ quat.skew(r_b)).reshape(x.shape[0], -1, 3)
         J[:, :, 3:6] = -(D @ np.swapaxes(R_q, -1, -2)[:, None]).reshape(x.shape[0], -1, 3)

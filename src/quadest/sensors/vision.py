@@ -1,5 +1,6 @@
 """Camera on the vehicle observing known beacons (seed 004's VisNav, Junkins et al. 1999 line of
-work): pixel coordinates or bearing angles of each beacon, at the camera's own rate.
+work): pixel coordinates, bearing angles or unit line-of-sight vectors of each beacon, at the
+camera's own rate.
 
 Frames: earth z up; body x forward, y left, z up (:mod:`quadest.numerics.quaternion`: ``q`` maps
 body → earth); camera frame of the pinhole convention (Hartley & Zisserman 2004, §6.1): ``z``
@@ -9,23 +10,32 @@ centre of mass (no lever arm). For beacon ``b`` (earth) and vehicle position ``p
     r_c = C_cb R(q)ᵀ (b − p)                       (line of sight in the camera frame)
     pixel:   (u, v) = (c_x + f x_c/z_c, c_y + f y_c/z_c)   (H&Z eq. 6.1, square pixels, no skew)
     bearing: (α, β) = (atan2(x_c, z_c), atan2(y_c, z_c))    (the two focal-plane angles)
+    line_of_sight: r_c / ‖r_c‖                       (seed 004 §1.3.2: the unit line-of-sight vector)
+
+``line_of_sight`` is the VisNav measurement of seed 004 (its §1.3.2 measures the unit vector from
+the camera to each beacon in the camera frame; the equation itself is lost from the seed's text, the
+form above is the standard one, Crassidis, Alonso & Junkins 2000). Three components per beacon,
+each with additive white noise: ``z = r_c/‖r_c‖ + v``; the measured vector is not renormalised,
+so the filters' additive model with ``R = σ² I`` describes the draws exactly (the component along
+the line of sight carries no information: ``bᵀ ∂b/∂r_c = 0``).
 
 ``C_cb`` is the mount: ``forward`` (optical axis along body x) or ``down`` (along body −z, image
 up towards body x), then tilted by ``tilt_deg`` about the camera x axis (positive: the optical
 axis turns towards the image's down direction, i.e. below the horizon for ``forward``).
 
-Error classes: white noise per sample (``pixel_noise`` in px or ``bearing_noise`` in rad, drawn
-under the sensor's :class:`~quadest.sensors.noise_laws.NoiseLaw`), and two per-run errors the
-filters do not know: a mount ``misalignment`` (one-sigma rad per axis, a small rotation of the
-camera frame) and a focal-length ``focal_scale`` error (one-sigma fraction). Draw order from the
-run's ``"vision"`` stream: misalignment (3), focal scale (1), then the noise (K+1, 2N), so a
-change of noise law leaves the per-run errors unchanged.
+Error classes: white noise per sample (``pixel_noise`` in px, ``bearing_noise`` in rad or
+``los_noise`` per unit-vector component, ≈ rad, drawn under the sensor's
+:class:`~quadest.sensors.noise_laws.NoiseLaw`, independently per component), and two per-run
+errors the filters do not know: a mount ``misalignment`` (one-sigma rad per axis, a small rotation
+of the camera frame) and a focal-length ``focal_scale`` error (one-sigma fraction; it moves pixels
+only). Draw order from the run's ``"vision"`` stream: misalignment (3), focal scale (1), then the
+noise (K+1, m), so a change of noise law leaves the per-run errors unchanged.
 
-Availability: a frame exists every ``round(1/(rate T))`` steps (the rate must divide the filter
-rate) and is used only when every beacon is in front of the camera, inside the image and within
-``max_range`` in every run of the batch (the runs differ only by their start point); other frames
-are dropped (the sample is NaN and unavailable), since one sensor record has one availability
-mask for the batch.
+Availability (every kind): a frame exists every ``round(1/(rate T))`` steps (the rate must divide
+the filter rate) and is used only when every beacon is in front of the camera, inside the field of
+view that ``focal_length`` and ``image_size`` span and within ``max_range`` in every run of the
+batch (the runs differ only by their start point); other frames are dropped (the sample is NaN
+and unavailable), since one sensor record has one availability mask for the batch.
 """
 
 from __future__ import annotations
@@ -39,7 +49,8 @@ from quadest.numerics import quaternion as quat
 from quadest.sensors.magnetometer import sample_stride
 from quadest.sensors.noise_laws import NoiseLaw, draw_noise
 
-KINDS = ("pixel", "bearing")
+KINDS = ("pixel", "bearing", "line_of_sight")
+ROWS = {"pixel": 2, "bearing": 2, "line_of_sight": 3}  # measurement rows per beacon
 MOUNTS = ("forward", "down")
 _MOUNT_ROWS = {
     "forward": np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]),
@@ -70,6 +81,7 @@ class VisionSpec:
     kind: str = "pixel"
     pixel_noise: float = 0.5
     bearing_noise: float = 2.5e-3
+    los_noise: float = 2.5e-3
     focal_length: float = 200.0
     image_size: list[float] = field(default_factory=lambda: [640.0, 480.0])
     mount: str = "forward"
@@ -86,16 +98,17 @@ class VisionSpec:
 
     @property
     def noise_std(self) -> float:
-        """The white-noise standard deviation in the unit of the measurement (px or rad)."""
-        return self.pixel_noise if self.kind == "pixel" else self.bearing_noise
+        """The white-noise standard deviation in the unit of the measurement (px, rad, or unit
+        vector component)."""
+        return {"pixel": self.pixel_noise, "bearing": self.bearing_noise, "line_of_sight": self.los_noise}[self.kind]
 
     @property
     def m(self) -> int:
-        return 2 * self.beacon_array.shape[0]
+        return ROWS[self.kind] * self.beacon_array.shape[0]
 
     def measurement_names(self) -> tuple[str, ...]:
-        a, b = ("u", "v") if self.kind == "pixel" else ("azimuth", "elevation")
-        return tuple(f"beacon{i + 1}_{c}" for i in range(self.beacon_array.shape[0]) for c in (a, b))
+        parts = {"pixel": ("u", "v"), "bearing": ("azimuth", "elevation"), "line_of_sight": ("los_x", "los_y", "los_z")}
+        return tuple(f"beacon{i + 1}_{c}" for i in range(self.beacon_array.shape[0]) for c in parts[self.kind])
 
 
 def mount_rotation(mount: str, tilt_deg: float) -> np.ndarray:
@@ -114,10 +127,13 @@ def line_of_sight(q: np.ndarray, p: np.ndarray, beacons: np.ndarray, C_cb: np.nd
 
 
 def project(r_c: np.ndarray, kind: str, focal_length, principal_point) -> np.ndarray:
-    """Measurements (..., 2N) of lines of sight (..., N, 3): pixels ``c + f (x, y)/z`` or bearings
-    ``(atan2(x, z), atan2(y, z))``. ``focal_length`` may carry the leading axes (per run)."""
+    """Measurements (..., 2N or 3N) of lines of sight (..., N, 3): pixels ``c + f (x, y)/z``,
+    bearings ``(atan2(x, z), atan2(y, z))`` or unit vectors ``r_c/‖r_c‖``. ``focal_length`` may
+    carry the leading axes (per run)."""
     x, y, z = r_c[..., 0], r_c[..., 1], r_c[..., 2]
-    if kind == "pixel":
+    if kind == "line_of_sight":
+        out = r_c / np.linalg.norm(r_c, axis=-1, keepdims=True)
+    elif kind == "pixel":
         f = np.asarray(focal_length)[..., None] if np.ndim(focal_length) else focal_length
         out = np.stack([principal_point[0] + f * x / z, principal_point[1] + f * y / z], axis=-1)
     else:
@@ -167,7 +183,12 @@ def measure_vision(
 def projection_jacobian(r_c: np.ndarray, kind: str, focal_length: float) -> np.ndarray:
     """``∂ project / ∂r_c`` (..., N, 2, 3) at lines of sight (..., N, 3): ``f [[1/z, 0, −x/z²],
     [0, 1/z, −y/z²]]`` for pixels; for bearings ``∂ atan2(x, z) = (z, 0, −x)/(x² + z²)`` and
-    ``∂ atan2(y, z) = (0, z, −y)/(y² + z²)``."""
+    ``∂ atan2(y, z) = (0, z, −y)/(y² + z²)``; for unit vectors (..., N, 3, 3)
+    ``∂(r/‖r‖)/∂r = (I − b bᵀ)/‖r‖`` with ``b = r/‖r‖``."""
+    if kind == "line_of_sight":
+        norm = np.linalg.norm(r_c, axis=-1)[..., None, None]
+        b = r_c[..., :, None] / norm
+        return (np.eye(3) - b * np.swapaxes(b, -1, -2)) / norm
     x, y, z = r_c[..., 0], r_c[..., 1], r_c[..., 2]
     zero = np.zeros_like(x)
     if kind == "pixel":
