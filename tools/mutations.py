@@ -16,8 +16,9 @@ they pass. The exit status is non-zero if any mutation is missed or a run errors
 mutations, the union of the named tests runs once on the unmutated copy: a test that fails
 without any bug catches nothing.
 
-The list covers the gaps of issue 15 (each had no failing test before) and classic sigma-point
-bugs. docs/testing.md describes it.
+The list covers the gaps of issue 15 (each had no failing test before), classic sigma-point
+bugs, and bugs of the kind that really happen which once passed the whole suite (a cache serving
+stale results, replay timing, χ² bands, roughening). docs/testing.md describes it.
 """
 
 from __future__ import annotations
@@ -52,6 +53,10 @@ IDENTITIES = "tests/test_srukf_identities.py::"
 RULES = "tests/test_rules.py::"
 FAMILY = "tests/test_sigma_point_family.py::"
 INTERFACES = "tests/test_estimator_interfaces.py::"
+CACHE_KEYS = "tests/test_cache_keys_property.py::"
+REPLAY_TIMING = "tests/test_replay_timing.py::"
+BANDS = "tests/test_consistency_bands.py::"
+ROUGHENING = "tests/test_roughening.py::"
 
 MUTATIONS = (
     Mutation(
@@ -260,6 +265,52 @@ MUTATIONS = (
         "below -= run + 2",
         "below -= run + 1",
         ("tests/test_resampling.py::test_strata_selection_follows_the_rule_across_blocks_and_at_the_edges",),
+    ),
+    Mutation(
+        "estimator cache key leaves out divergence_bound",
+        "src/quadest/cache/keys.py",
+        '            "divergence_bound": float(divergence_bound),\n',
+        "",
+        (CACHE_KEYS + "test_every_leaf_of_the_config_changes_the_keys_of_what_it_affects[defaults]",
+         CACHE_KEYS + "test_a_job_recomputes_its_estimators_when_a_runner_setting_changes[divergence_bound]"),
+    ),
+    Mutation(
+        "estimator cache key leaves out the square-root kernels backend",
+        "src/quadest/cache/keys.py",
+        '            "kernels": kernel_backend(),\n',
+        "",
+        (CACHE_KEYS + "test_the_square_root_kernels_backend_is_in_every_estimator_key",),
+    ),
+    Mutation(
+        "code version covers only the package's top-level modules",
+        "src/quadest/cache/keys.py",
+        'package_dir.rglob("*.py")',
+        'package_dir.glob("*.py")',
+        (CACHE_KEYS + "test_editing_any_source_file_changes_the_code_version",),
+    ),
+    Mutation(
+        "replayed accelerometer timed by sensor_combined.timestamp alone",
+        "src/quadest/replay/ulog.py",
+        'accel_time = _seconds(sc["timestamp"] + sc.get("accelerometer_timestamp_relative", 0))',
+        'accel_time = _seconds(sc["timestamp"])',
+        (REPLAY_TIMING + "test_every_relative_timestamp_field_times_its_sensor",
+         REPLAY_TIMING + "test_the_replay_measures_the_accelerometer_at_its_px4_times"),
+    ),
+    Mutation(
+        "NIS band share with the state's degrees of freedom",
+        "src/quadest/metrics.py",
+        '"nis_in_band": fraction_inside(res.nis_mean_t, m, res.alive_t)',
+        '"nis_in_band": fraction_inside(res.nis_mean_t, n, res.alive_t)',
+        (BANDS + "test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis[linear]",
+         BANDS + "test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis[attitude]"),
+    ),
+    Mutation(
+        "roughening with the kernel-bandwidth exponent N^(-1/(n+4))",
+        "src/quadest/estimators/particle.py",
+        "self.N ** (-1.0 / n)",
+        "self.N ** (-1.0 / (n + 4))",
+        (ROUGHENING + "test_roughening_jitter_has_the_standard_deviation_of_gordon_salmond_and_smith[pf]",
+         ROUGHENING + "test_roughening_jitter_has_the_standard_deviation_of_gordon_salmond_and_smith[upf]"),
     ),
 )  # fmt: skip
 

@@ -1,21 +1,25 @@
 """Cache keys: what determines a job's Monte Carlo data and one estimator's result.
 
 A key is the SHA-256 of a canonical JSON text (sorted keys, no spaces) of everything the cached
-value depends on (``docs/cache.md``):
+value depends on (``docs/cache.md``). Every leaf of the resolved job config is in exactly one of
+three places:
 
-- **data key**: the resolved job config without the keys listed in :data:`NOT_DATA_KEYS` (the
-  estimators, parallelism, output settings, ...), plus :func:`code_version`. A top-level key that
-  is not in that list (a new one, too) is part of the data key: an unknown key costs a cache miss,
-  never a wrong hit.
-- **estimator key**: the data key, the estimator's label and resolved config node, the settings
-  of the runner that change its result (``divergence_bound``, the number of saved runs) and, for
-  an estimator class from outside the quadest package, the digest of that class's top-level
-  package or module source (:func:`plugin_digest`). A class whose source cannot be found is never
-  cached.
+- :data:`RESULT_NEUTRAL`, the one declared list of settings that change no number (progress bars,
+  processes, figures, the cache's own settings, ...): in no key;
+- the **estimator key**: the estimator's own node (``estimator.<label>``) and the runner settings
+  :data:`RUNNER_KEYS`, with the data key, the estimator's label, the backend of the square-root
+  numerics (``QUADEST_KERNELS``, an environment setting) and, for an estimator class from
+  outside the quadest package, the digest of that class's top-level package or module source
+  (:func:`plugin_digest`; a class whose source cannot be found is never cached);
+- the **data key**: every other leaf (a new key too: an unknown key costs a cache miss, never a
+  wrong hit), plus :func:`code_version`.
+
+``tests/test_cache_keys_property.py`` checks this for every leaf of every config group option.
 """
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import platform
@@ -29,17 +33,36 @@ from typing import Any
 from omegaconf import OmegaConf
 
 import quadest
+from quadest.numerics.square_root import kernel_backend
 from quadest.replay.data import log_path
 
 FORMAT = 1  # bump when the layout of a cached value changes
-NOT_DATA_KEYS = frozenset(
-    {"estimator", "divergence_bound", "workers", "progress", "output", "objective", "sweep", "cache", "hydra"}
+RESULT_NEUTRAL = (
+    "progress",
+    "workers",
+    "output.figures",
+    "output.per_estimator_figures",
+    "objective",
+    "cache",
+    "sweep",
+    "hydra",
 )
-"""Top-level config keys that do not change the Monte Carlo data. ``sweep`` only holds values
-that other keys interpolate; they are resolved into those keys before hashing."""
-RESULT_LIBRARIES = ("numpy", "scipy", "filterpy", "pyulog", "ahrs")
+"""Config paths (a node stands for its whole subtree) that change no cached value, and so are in
+no key: progress bars, worker processes, which figures are drawn, the tuning objective (computed
+from ``summary.json`` after the job), the cache's own settings, Hydra's output folders and
+launchers, and ``sweep``, which only holds values that other keys interpolate (they are resolved
+into those keys before hashing). The one place where a setting is declared result-neutral."""
+RUNNER_KEYS = ("divergence_bound", "output.saved_runs")
+"""Settings of the runner (:func:`quadest.runner.run_estimator`): every estimator's result depends
+on them, the data does not. They are in the estimator key."""
+ESTIMATORS = "estimator"
+"""The node of the estimators: ``estimator.<label>`` is in that estimator's key only."""
+NOT_DATA_KEYS = (*RESULT_NEUTRAL, *RUNNER_KEYS, ESTIMATORS)
+"""Config paths left out of the data key."""
+RESULT_LIBRARIES = ("numpy", "scipy", "filterpy", "pyulog", "ahrs", "numba")
 """Libraries whose version is part of the code version: the built-in filters compute with them, the
-replay reads its log with pyulog and the attitude anchors are the ``ahrs`` package's filters."""
+replay reads its log with pyulog, the attitude anchors are the ``ahrs`` package's filters and numba
+compiles the square-root kernels (:mod:`quadest.numerics.compiled`)."""
 
 
 def digest_text(material: Mapping[str, Any]) -> str:
@@ -62,12 +85,9 @@ def _python_files(package_dir: Path) -> list[Path]:
     return [p for p in package_dir.rglob("*.py") if "__pycache__" not in p.parts]
 
 
-@cache
-def code_version() -> str:
-    """Digest of the quadest package source (every ``.py`` file under the installed package, read
-    once per process: the code this process runs), the Python version and the versions of
-    :data:`RESULT_LIBRARIES`. Works outside git and in a dirty tree."""
-    root = Path(quadest.__file__).parent
+def package_version(root: Path) -> str:
+    """Digest of the package source under ``root`` (every ``.py`` file in it and in all its
+    subpackages, at any depth), the Python version and the versions of :data:`RESULT_LIBRARIES`."""
     versions = {}
     for name in RESULT_LIBRARIES:
         try:
@@ -77,6 +97,13 @@ def code_version() -> str:
     return digest_text(
         {"source": source_digest(_python_files(root), root), "python": platform.python_version(), **versions}
     )
+
+
+@cache
+def code_version() -> str:
+    """:func:`package_version` of the installed quadest package, read once per process (the code
+    this process runs). Works outside git and in a dirty tree."""
+    return package_version(Path(quadest.__file__).parent)
 
 
 @cache
@@ -109,27 +136,50 @@ def plugin_digest(cls: type) -> str | None:
     return _module_source_digest(module.split(".")[0])
 
 
-def data_material(cfg) -> dict[str, Any]:
-    """The resolved config entries that determine the Monte Carlo data; for a replay
-    (``source``) also the digest of the log file's bytes, so a changed log at the same path misses."""
-    resolved = OmegaConf.to_container(cfg, resolve=True)
-    material = {key: value for key, value in resolved.items() if key not in NOT_DATA_KEYS}
+def without_paths(tree: dict[str, Any], paths: Iterable[str]) -> dict[str, Any]:
+    """``tree`` (nested dicts, changed in place and returned) without the dotted ``paths``."""
+    for path in paths:
+        *parents, last = path.split(".")
+        node = tree
+        for key in parents:
+            node = node.get(key) if isinstance(node, dict) else None
+        if isinstance(node, dict):
+            node.pop(last, None)
+    return tree
+
+
+def data_material(resolved: dict[str, Any]) -> dict[str, Any]:
+    """What determines the Monte Carlo data: the resolved config ``resolved`` (a plain dict, as
+    ``OmegaConf.to_container(cfg, resolve=True)`` gives it) without :data:`NOT_DATA_KEYS`; for a
+    replay (``source``) also the digest of the log file's bytes, so a changed log at the same path
+    misses."""
+    material = without_paths(copy.deepcopy(resolved), NOT_DATA_KEYS)
     if resolved.get("source") is not None:
-        path = log_path(cfg)
+        path = log_path(OmegaConf.create({"source": resolved["source"]}))
         material["source_log"] = source_digest([path], path.parent)
     return material
 
 
+def resolved_data_key(resolved: dict[str, Any]) -> str:
+    """Key of the Monte Carlo data of the resolved job config ``resolved`` (a plain dict)."""
+    return digest_text({"format": FORMAT, "kind": "data", "code": code_version(), "config": data_material(resolved)})
+
+
 def data_key(cfg) -> str:
     """Key of the Monte Carlo data of job config ``cfg``."""
-    return digest_text({"format": FORMAT, "kind": "data", "code": code_version(), "config": data_material(cfg)})
+    return resolved_data_key(OmegaConf.to_container(cfg, resolve=True))
 
 
 def estimator_key(
     data: str, label: str, node: Mapping[str, Any], cls: type, divergence_bound: float, saved_runs: int
 ) -> str | None:
     """Key of the result of estimator ``label`` (resolved config ``node``, class ``cls``) on the
-    data of key ``data``; ``None`` if it must not be cached (a plugin without readable source)."""
+    data of key ``data``; ``None`` if it must not be cached (a plugin without readable source).
+
+    It also holds the backend of the square-root numerics (``QUADEST_KERNELS``, numba or numpy:
+    :func:`quadest.numerics.square_root.kernel_backend`), which every estimator's NEES and NIS and
+    the square-root filters go through: the two agree to round-off only, and their step times differ.
+    The data does not use them."""
     plugin = plugin_digest(cls)
     if plugin is None:
         return None
@@ -144,5 +194,6 @@ def estimator_key(
             "plugin": plugin,
             "divergence_bound": float(divergence_bound),
             "saved_runs": int(saved_runs),
+            "kernels": kernel_backend(),
         }
     )
