@@ -10,21 +10,32 @@ Everything is measured in the same run, on the same data:
 2. batched throughput of the SR-UKF in µs per filter step per run at B = 1, 10, 100, 1000, and
    the speed-up at B = 1000 over filterpy's UKF looped over runs (per-point use);
 3. peak resident memory of a full 1000-run, 20 s, 100 Hz batch (truth, sensors and the
-   SR-UKF with the runner's metrics), measured in a separate process.
+   SR-UKF with the runner's metrics), measured in a separate process;
+4. the compiled square-root kernels (``QUADEST_KERNELS=numba``, docs/benchmarks.md) against their
+   numpy references at B = 1000 on the thesis model's sizes, the SR-UKF on the numpy references
+   (single run and B = 1000), the kernels with ``parallel=True`` over chunks of runs against the
+   serial ones, and the first-call compile time and the cached load time of the kernels (each
+   measured in fresh processes with an empty numba cache directory of their own).
+
+The 1-minute load average is printed before and after: the machine may be shared.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Callable
 
 import numpy as np
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
+from numba import get_num_threads, njit, prange
 
 from quadest.config.paths import config_dir
 from quadest.config.schema import register_schemas
@@ -32,6 +43,7 @@ from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.srukf import SRUKF
 from quadest.models.quadrotor_data import build_quadrotor_data
+from quadest.numerics import compiled, square_root
 
 BATCHES = (1, 10, 100, 1000)
 
@@ -80,13 +92,137 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
     return int(out.stdout.strip().splitlines()[-1]) / 1024.0  # ru_maxrss is in KiB on Linux
 
 
+def best_us(fun: Callable[[], object], repeats: int = 50, blocks: int = 5) -> float:
+    """Best mean wall time of ``fun()`` over ``blocks`` blocks of ``repeats`` calls, in µs."""
+    fun()
+    best = float("inf")
+    for _ in range(blocks):
+        start = time.perf_counter()
+        for _ in range(repeats):
+            fun()
+        best = min(best, (time.perf_counter() - start) / repeats * 1e6)
+    return best
+
+
+def kernel_inputs(B: int, n: int = 6, m: int = 6) -> dict[str, tuple]:
+    """The thesis model's sizes: the QR of 2n sigma columns and √Q (n × 3n), the W0 column, the
+    posterior downdate by ``K Sy`` (n columns), the gain and the whitening of an m-vector."""
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((B, n, 3 * n))
+    S = square_root.qr_factor_numpy(A)
+    return {
+        "qr": (A,),
+        "cholupdate_1": (S, 0.3 * rng.standard_normal((B, n)), 0.5),
+        "cholupdate_n": (S, 0.3 * S @ rng.standard_normal((B, n, n)) / n, -1.0),
+        "kalman_gain": (rng.standard_normal((B, n, m)), S[:, :m, :m]),
+        "whiten": (S[:, :m, :m], rng.standard_normal((B, m))),
+    }
+
+
+def kernel_ratios(B: int) -> dict[str, dict[str, float]]:
+    """Each public function on both backends (µs per call for the batch) and compiled ÷ numpy."""
+    functions = {
+        "qr": square_root.qr_factor,
+        "cholupdate_1": square_root.cholupdate,
+        "cholupdate_n": square_root.cholupdate,
+        "kalman_gain": square_root.kalman_gain,
+        "whiten": square_root.whiten,
+    }
+    out = {}
+    for name, args in kernel_inputs(B).items():
+        times = {}
+        for backend in ("numba", "numpy"):
+            os.environ[square_root.KERNELS_ENV] = backend
+            times[backend] = best_us(lambda f=functions[name], a=args: f(*a))
+        out[name] = {
+            "numba_us": round(times["numba"], 1),
+            "numpy_us": round(times["numpy"], 1),
+            "compiled_over_numpy": round(times["numba"] / times["numpy"], 3),
+        }
+    os.environ.pop(square_root.KERNELS_ENV)
+    return out
+
+
+@njit(parallel=True)
+def _qr_threads(A, out, chunks):
+    B, n, L = A.shape
+    for c in prange(chunks):
+        compiled.qr_factor_runs(A, out, np.empty((n, L)), c * B // chunks, (c + 1) * B // chunks)
+
+
+@njit(parallel=True)
+def _cholupdate_threads(S, X, scale, downdate, out, failed, chunks):
+    B, n, _ = S.shape
+    for c in prange(chunks):
+        v = np.empty(n)
+        compiled.cholupdate_runs(S, X, scale, downdate, out, failed, v, c * B // chunks, (c + 1) * B // chunks)
+
+
+def kernel_threads(B: int) -> dict[str, dict[str, float]]:
+    """The serial kernels against the same bodies run by ``prange`` over one chunk of runs per
+    thread (``parallel=True``), µs per call for the batch."""
+    inputs = kernel_inputs(B)
+    A = inputs["qr"][0]
+    S, U, _ = inputs["cholupdate_n"]
+    out, failed, threads = np.empty_like(S), np.zeros(B, dtype=bool), get_num_threads()
+    pairs = {
+        "qr": (lambda: compiled.qr_factor_kernel(A, out), lambda: _qr_threads(A, out, threads)),
+        "cholupdate_n": (
+            lambda: compiled.cholupdate_kernel(S, U, 1.0, True, out, failed),
+            lambda: _cholupdate_threads(S, U, 1.0, True, out, failed, threads),
+        ),
+    }
+    return {
+        name: {"serial_us": round(best_us(serial), 1), "parallel_us": round(best_us(parallel), 1), "threads": threads}
+        for name, (serial, parallel) in pairs.items()
+    }
+
+
+COMPILE_SCRIPT = """
+import json, time
+import numpy as np
+start = time.perf_counter()
+import numba
+from quadest.numerics import compiled, square_root
+imported = time.perf_counter()
+rng = np.random.default_rng(0)
+A = rng.standard_normal((2, 6, 18))
+S = square_root.qr_factor(A)
+square_root.cholupdate(S, 0.1 * S, -1.0)
+square_root.kalman_gain(A[:, :, :6], S)
+square_root.whiten(S, A[:, :, 0])
+print(json.dumps({"import_s": imported - start, "first_calls_s": time.perf_counter() - imported}))
+"""
+
+
+def compile_times() -> dict[str, float]:
+    """First calls of the four kernels in a fresh process with an empty numba cache (they compile),
+    then in a second fresh process with that cache (they load), and numba's import time."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, square_root.KERNELS_ENV: "numba"}
+        runs = [
+            json.loads(subprocess.run([sys.executable, "-c", COMPILE_SCRIPT], env=env, capture_output=True,
+                                      text=True, check=True).stdout)
+            for _ in range(2)
+        ]  # fmt: skip
+    return {
+        "compile_s": round(runs[0]["first_calls_s"], 3),
+        "cached_load_s": round(runs[1]["first_calls_s"], 3),
+        "numba_import_s": round(runs[1]["import_s"], 3),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="end with one JSON line of the results")
     parser.add_argument("--steps", type=int, default=200, help="filter steps timed per measurement")
     parser.add_argument("--skip-memory", action="store_true", help="skip the 1000-run memory measurement")
+    parser.add_argument("--skip-compile", action="store_true", help="skip the compile-time measurement")
     args = parser.parse_args()
     steps = args.steps
+    load_start = os.getloadavg()[0]
+    print(f"load average (1 min) at the start: {load_start:.2f}")
+    compile_info = {} if args.skip_compile else compile_times()
 
     data_all = build_quadrotor_data(config([f"runs={max(BATCHES)}", f"duration={(steps + 1) * 0.01}"]))
     u_all = filter_inputs(data_all)
@@ -100,8 +236,14 @@ def main() -> None:
         for _ in range(2)
     )
     fp_vec = min(time_steps(PerRunAdapter(single.model, FilterpyUKF, alpha=alpha), single, u1, steps) for _ in range(2))
+    os.environ[square_root.KERNELS_ENV] = "numpy"
+    sr_single_numpy = min(time_steps(SRUKF(single.model, alpha), single, u1, steps) for _ in range(2))
+    est = SRUKF(data_all.model, alpha)
+    batched_numpy = min(time_steps(est, data_all, u_all, steps) for _ in range(2)) / max(BATCHES)
+    os.environ.pop(square_root.KERNELS_ENV)
     print(f"single run, {single.model.name} (n={single.model.n}), alpha={alpha}, {steps} steps")
     print(f"  SR-UKF                                 {sr_single:9.1f} us/step")
+    print(f"  SR-UKF on the numpy kernels            {sr_single_numpy:9.1f} us/step")
     print(
         f"  filterpy UKF, per-point fx/hx          {fp_plain:9.1f} us/step   SR-UKF ratio {sr_single / fp_plain:.2f}x"
     )
@@ -118,7 +260,27 @@ def main() -> None:
             f"  B={B:>5s}  {us:9.2f} us   speed-up over filterpy per-point loop {fp_plain / us:8.1f}x, "
             f"over vectorised filterpy loop {fp_vec / us:7.1f}x"
         )
+    print(
+        f"  B={max(BATCHES):>5d}  {batched_numpy:9.2f} us   on the numpy kernels "
+        f"(speed-up over filterpy per-point loop {fp_plain / batched_numpy:.1f}x)"
+    )
     speedup = fp_plain / batched[str(max(BATCHES))]
+    kernels = kernel_ratios(max(BATCHES))
+    threads = kernel_threads(max(BATCHES))
+    print(f"square-root kernels at B={max(BATCHES)}, us per call for the batch (compiled / numpy reference):")
+    for name, k in kernels.items():
+        print(f"  {name:13s} {k['numba_us']:9.1f} / {k['numpy_us']:9.1f}   ratio {k['compiled_over_numpy']:.3f}")
+    for name, k in threads.items():
+        print(
+            f"  {name:13s} serial {k['serial_us']:9.1f} us, "
+            f"parallel=True on {k['threads']} threads {k['parallel_us']:9.1f} us"
+        )
+    if compile_info:
+        print(
+            f"kernels' first calls in a fresh process: {compile_info['compile_s']:.2f} s compiling (empty cache), "
+            f"{compile_info['cached_load_s']:.3f} s loading from the cache; "
+            f"numba import {compile_info['numba_import_s']:.2f} s"
+        )
     result = {
         "srukf_single_us": round(sr_single, 2),
         "filterpy_ukf_single_us": round(fp_plain, 2),
@@ -126,11 +288,21 @@ def main() -> None:
         "batched_us_per_step_run": {k: round(v, 3) for k, v in batched.items()},
         "speedup_vs_filterpy": round(speedup, 1),
         "peak_mem_mb": None,
+        "srukf_over_filterpy_vectorized": round(sr_single / fp_vec, 3),
+        "srukf_numpy_kernels_single_us": round(sr_single_numpy, 2),
+        "batched_numpy_kernels_us_per_step_run": round(batched_numpy, 3),
+        "kernels": kernels,
+        "kernel_threads": threads,
+        **compile_info,
+        "peak_mem_mb_per_run": None,
     }
     if not args.skip_memory:
         result["peak_mem_mb"] = round(peak_memory_mb(1000), 1)
+        result["peak_mem_mb_per_run"] = round(result["peak_mem_mb"] / 1000, 3)
         print(f"peak RSS of a 1000-run, 20 s, 100 Hz batch (truth + SR-UKF + metrics): {result['peak_mem_mb']} MB")
     print(f"this process peak RSS: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+    result["load_average"] = {"start": round(load_start, 2), "end": round(os.getloadavg()[0], 2)}
+    print(f"load average (1 min) at the end: {result['load_average']['end']:.2f}")
     if args.json:
         print(json.dumps(result))
 

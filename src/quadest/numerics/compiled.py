@@ -17,9 +17,10 @@ The callers are the public functions of :mod:`quadest.numerics.square_root`, whi
 backend (``QUADEST_KERNELS``, docs/benchmarks.md) and check the shapes; the kernels expect
 C-contiguous float64 arrays and write into ``out`` arrays given to them.
 
-Threads: ``parallel=True`` with ``prange`` over runs was measured against this serial loop on the
-2-core machine (``python benchmarks/bench_srukf.py``, docs/benchmarks.md) and did not pay for its
-thread start-up at these matrix sizes, so the kernels are serial. ``error_model="numpy"`` makes a
+Threads: the QR and cholupdate kernels are a serial driver around a body for a range of runs
+(``*_runs``), so that ``parallel=True`` with ``prange`` over chunks of runs can be measured with the
+same body (``python benchmarks/bench_srukf.py``, docs/benchmarks.md). On the shared 2-core machine
+it did not pay at these matrix sizes, so the kernels are serial. ``error_model="numpy"`` makes a
 division by zero give inf/NaN (as in numpy) instead of raising, so a broken run stays in its row.
 ``cache=True`` keeps the machine code on disk (next to this file, or numba's user cache when that
 directory is read-only); only the kernels a job calls are compiled.
@@ -37,16 +38,24 @@ _JIT = {"cache": True, "error_model": "numpy", "nogil": True}
 
 @njit(**_JIT)
 def qr_factor_kernel(A: np.ndarray, out: np.ndarray) -> None:
-    """``out[b]`` lower triangular with a positive diagonal and ``out[b] out[b]ᵀ = A[b] A[b]ᵀ``.
+    """``out[b]`` for every run: see :func:`qr_factor_runs`."""
+    _, n, L = A.shape
+    qr_factor_runs(A, out, np.empty((n, L)), 0, A.shape[0])
+
+
+@njit(**_JIT)
+def qr_factor_runs(A: np.ndarray, out: np.ndarray, W: np.ndarray, first: int, stop: int) -> None:
+    """``out[b]`` for runs ``first ≤ b < stop``: lower triangular with a positive diagonal and
+    ``out[b] out[b]ᵀ = A[b] A[b]ᵀ``.
 
     ``A`` (B, n, L) with L ≥ n. Row ``k`` of the working copy is reflected onto ``e_k`` by the
     Householder vector ``v = x − α e_1`` with ``α = −sign(x_0) ‖x‖`` (no cancellation in ``v_0``),
     applied to the rows below; ``S[k, k] = |α|`` and column ``k`` of ``S`` is multiplied by
     ``sign(α)``, which leaves ``S Sᵀ`` unchanged (the reference's sign fix, eqs 5.18, 5.23).
+    ``W`` (n, L) is the scratch copy of one run.
     """
-    B, n, L = A.shape
-    W = np.empty((n, L))
-    for b in range(B):
+    _, n, L = A.shape
+    for b in range(first, stop):
         for i in range(n):
             for j in range(L):
                 W[i, j] = A[b, i, j]
@@ -82,17 +91,34 @@ def qr_factor_kernel(A: np.ndarray, out: np.ndarray) -> None:
 def cholupdate_kernel(
     S: np.ndarray, X: np.ndarray, scale: float, downdate: bool, out: np.ndarray, failed: np.ndarray
 ) -> None:
-    """``out[b]``: the factor of ``S Sᵀ ± scale² Σ_j x_j x_jᵀ`` for the columns ``x_j`` of ``X[b]``.
+    """``out[b]`` and ``failed[b]`` for every run: see :func:`cholupdate_runs`."""
+    cholupdate_runs(S, X, scale, downdate, out, failed, np.empty(S.shape[1]), 0, S.shape[0])
+
+
+@njit(**_JIT)
+def cholupdate_runs(
+    S: np.ndarray,
+    X: np.ndarray,
+    scale: float,
+    downdate: bool,
+    out: np.ndarray,
+    failed: np.ndarray,
+    v: np.ndarray,
+    first: int,
+    stop: int,
+) -> None:
+    """``out[b]`` for runs ``first ≤ b < stop``: the factor of ``S Sᵀ ± scale² Σ_j x_j x_jᵀ`` for
+    the columns ``x_j`` of ``X[b]``.
 
     ``S`` (B, n, n), ``X`` (B, n, k). The arithmetic of each pivot is the reference's (eq. 5.29):
     ``r = √(L_kk² ± v_k²)``, ``c = r / L_kk``, ``s = v_k / L_kk``, ``col = (col ± s v) / c``,
     ``v = c v − s col``. A run whose result has a non-positive or NaN diagonal or a non-finite entry
     (a failed downdate, or a NaN input) gets ``failed[b] = True`` and its input factor back.
+    ``v`` (n,) is the scratch column.
     """
-    B, n, _ = S.shape
+    n = S.shape[1]
     k = X.shape[2]
-    v = np.empty(n)
-    for b in range(B):
+    for b in range(first, stop):
         for i in range(n):
             for j in range(n):
                 out[b, i, j] = S[b, i, j]
