@@ -1,14 +1,15 @@
 """Random streams, as a property over every registered model (``quadest.montecarlo.streams``).
 
-For every model option (the benchmark and validation models included) and the flight-log replay,
-the data builder must hand the estimators run i's ``"estimator"`` stream,
-``SeedSequence(seed, spawn_key=(i, STREAMS.index("estimator")))``, and the data itself (truth,
-sensors, noise, initial estimates) must be drawn from other streams of the same ``SeedSequence(seed)``
-only: so the estimators' own draws (particle filters) share no draw with the data's, and every
-estimator sees the same data whatever it draws. The test records every generator the builder
-makes through ``np.random.default_rng`` (which :func:`~quadest.montecarlo.streams.run_streams`
-uses), keeps those it drew from, and checks their seeds and their first draws; numpy's global
-generator must be left alone. Only the data is built; no estimator runs.
+For every model option (the benchmark and validation models included), the flight-log replay and
+the closed loop flown on the truth or on its state sensor, the data builder must hand the
+estimators run i's ``"estimator"`` stream, ``SeedSequence(seed, spawn_key=(i,
+STREAMS.index("estimator")))``, and the data itself (truth, sensors, noise, initial estimates)
+must be drawn from other streams of the same ``SeedSequence(seed)`` only: so the estimators' own
+draws (particle filters) share no draw with the data's, and every estimator sees the same data
+whatever it draws. The test records every generator the builder makes through
+``np.random.default_rng`` (which :func:`~quadest.montecarlo.streams.run_streams` uses), keeps
+those it drew from, and checks their seeds and their first draws; numpy's global generator must be
+left alone. Only the data is built; no estimator runs.
 """
 
 from __future__ import annotations
@@ -17,12 +18,25 @@ import numpy as np
 import pytest
 
 from helpers import compose_config
+from quadest.closed_loop.quadrotor import QuadrotorLoop
 from quadest.models.registry import build_data, model_specs
 from quadest.montecarlo.streams import STREAMS
 
 SEED, RUNS = 31, 3
 CONFIGS = {name: [f"model={name}", "duration=0.3"] for name in sorted(model_specs())}
 CONFIGS["px4_replay"] = ["experiment=px4_replay", "duration=1.0"]
+CONFIGS["closed_loop_truth"] = ["loop=truth", "duration=0.3"]
+CONFIGS["closed_loop_measured"] = ["loop=measured", "duration=0.3"]
+
+
+def build(cfg):
+    """The data the estimators get: the open loop's (:func:`build_data`), or, in the closed loop
+    flown on the truth or on a noisy state sensor, the measurements of the shared flight."""
+    if cfg.loop in ("truth", "measured"):
+        return QuadrotorLoop.from_config(cfg).fly_shared(str(cfg.loop))[1]
+    return build_data(cfg)
+
+
 ESTIMATOR = STREAMS.index("estimator")
 DRAWS = 256
 
@@ -54,7 +68,7 @@ def test_estimators_get_the_estimator_stream_and_share_no_draw_with_the_data(nam
 
     before = global_state()
     monkeypatch.setattr(np.random, "default_rng", recording_default_rng)
-    data = build_data(cfg)
+    data = build(cfg)
     monkeypatch.undo()
     runs = data.truth.shape[0]
     assert global_state() == before, f"{name}: the data builder drew from numpy's global generator"
