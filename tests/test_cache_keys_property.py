@@ -35,9 +35,12 @@ from quadest.cache import keys
 from quadest.cache.lookup import JobCache
 from quadest.cache.store import CacheStore
 from quadest.config.paths import config_dir
+from quadest.estimators.registry import builtin_estimators
+from quadest.models.registry import model_specs
+from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import log_path
 
-Path_ = tuple[str | int, ...]
+LeafPath = tuple[str | int, ...]
 
 
 def group_options() -> list[list[str]]:
@@ -62,7 +65,7 @@ def group_options() -> list[list[str]]:
 OPTIONS = group_options()
 
 
-def leaves(node, path: Path_ = ()) -> Iterator[tuple[Path_, object]]:
+def leaves(node, path: LeafPath = ()) -> Iterator[tuple[LeafPath, object]]:
     """Every leaf of a resolved config: scalars, list items, and empty dicts or lists (which a
     change can fill)."""
     if isinstance(node, dict) and node:
@@ -75,7 +78,7 @@ def leaves(node, path: Path_ = ()) -> Iterator[tuple[Path_, object]]:
         yield path, node
 
 
-def unset_node(cfg, path: Path_) -> bool:
+def unset_node(cfg, path: LeafPath) -> bool:
     """Whether ``path`` is an optional config node left null (``source: null``): its fields are
     leaves of the options that set it (``experiment=px4_replay``), not values to change here."""
     node = cfg
@@ -84,16 +87,16 @@ def unset_node(cfg, path: Path_) -> bool:
     return isinstance(node, DictConfig) and node._is_none()
 
 
-def dotted(path: Path_) -> str:
+def dotted(path: LeafPath) -> str:
     return ".".join(map(str, path))
 
 
-def under(path: Path_, prefixes: tuple[str, ...]) -> bool:
+def under(path: LeafPath, prefixes: tuple[str, ...]) -> bool:
     text = dotted(path)
     return any(text == p or text.startswith(p + ".") for p in prefixes)
 
 
-def changed(path: Path_, value, cfg, tmp_path: Path):
+def changed(path: LeafPath, value, cfg, tmp_path: Path):
     """Another value of the same kind. A file path is changed to a copy of the file it names (the
     same bytes under another name): a key that follows only the bytes would miss that."""
     if path[-1] == "path" and path[0] == "source":
@@ -117,7 +120,7 @@ def changed(path: Path_, value, cfg, tmp_path: Path):
     return "changed"
 
 
-def with_value(resolved: dict, path: Path_, value) -> dict:
+def with_value(resolved: dict, path: LeafPath, value) -> dict:
     tree = copy.deepcopy(resolved)
     node = tree
     for key in path[:-1]:
@@ -173,6 +176,12 @@ def test_the_family_covers_every_group_and_the_job_keys():
     together they hold the job keys, every model, sensor, scenario and estimator node."""
     groups = {o[0].split("=")[0] for o in OPTIONS if o}
     assert {"model", "sensor", "scenario", "estimator", "experiment"} <= groups
+    options = {o[0] for o in OPTIONS if o}
+    assert {f"model={name}" for name in model_specs()} <= options, "a registered model without a config option"
+    flown = {OmegaConf.get_type(compose_config([o]).scenario) for o in options if o.startswith("scenario=")}
+    assert set(SCENARIOS.values()) <= flown, "a scenario schema no config option uses"
+    walked = set(compose_config(OPTIONS[-1]).estimator)
+    assert set(builtin_estimators()) <= walked, "a registered estimator the walk does not reach"
     top = set(OmegaConf.to_container(compose_config(), resolve=True))
     assert {"runs", "seed", "duration", "sample_period", "divergence_bound", "model", "sensor", "scenario"} <= top
     default = compose_config()
