@@ -291,8 +291,16 @@ MUTATIONS = (
     Mutation(
         "replayed accelerometer timed by sensor_combined.timestamp alone",
         "src/quadest/replay/ulog.py",
-        'accel_time = _seconds(sc["timestamp"] + sc.get("accelerometer_timestamp_relative", 0))',
-        'accel_time = _seconds(sc["timestamp"])',
+        'accel_time = _seconds((sc["timestamp"] + accel_relative)[accel_valid])',
+        'accel_time = _seconds(sc["timestamp"][accel_valid])',
+        (REPLAY_TIMING + "test_every_relative_timestamp_field_times_its_sensor",
+         REPLAY_TIMING + "test_the_replay_measures_the_accelerometer_at_its_px4_times"),
+    ),
+    Mutation(
+        "replayed accelerometer keeps the rows that hold no sample",
+        "src/quadest/replay/ulog.py",
+        "accel_valid = accel_relative != RELATIVE_TIMESTAMP_INVALID",
+        "accel_valid = np.ones_like(accel_relative, dtype=bool)",
         (REPLAY_TIMING + "test_every_relative_timestamp_field_times_its_sensor",
          REPLAY_TIMING + "test_the_replay_measures_the_accelerometer_at_its_px4_times"),
     ),

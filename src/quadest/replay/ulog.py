@@ -52,8 +52,10 @@ class FlightLog:
         path: where the log was read from (for messages).
         layout: ``"older"`` (magnetometer in ``sensor_combined``) or ``"current"``.
         imu_time: (N,) gyro sample times; ``gyro`` (N, 3) rad/s, FRD.
-        accel_time, accel: (N,) and (N, 3) specific force, m/s², FRD (``timestamp`` plus
-            ``accelerometer_timestamp_relative``: 0 in the older layout, a few µs in current logs).
+        accel_time, accel: (A,) and (A, 3) specific force, m/s², FRD (``timestamp`` plus
+            ``accelerometer_timestamp_relative``: 0 in the older layout, a few µs in current logs);
+            rows whose offset is ``RELATIVE_TIMESTAMP_INVALID`` hold no accelerometer sample and
+            are left out.
         mag_time, mag: (M,) and (M, 3) gauss, FRD; each distinct sample once.
         reference_time, reference_q: PX4's onboard attitude estimate ``vehicle_attitude``,
             (R,) and (R, 4) scalar-first unit quaternions, body FRD → earth NED.
@@ -100,8 +102,10 @@ def flight_log_from(ulog, path: str = "<log>") -> FlightLog:
     sc = _topic(topics, "sensor_combined", path)
     imu_time = _seconds(sc["timestamp"])
     gyro = _vector(sc, "gyro_rad", path, "sensor_combined")
-    accel = _vector(sc, "accelerometer_m_s2", path, "sensor_combined")
-    accel_time = _seconds(sc["timestamp"] + sc.get("accelerometer_timestamp_relative", 0))
+    accel_relative = sc.get("accelerometer_timestamp_relative", np.zeros_like(sc["timestamp"]))
+    accel_valid = accel_relative != RELATIVE_TIMESTAMP_INVALID  # a row without an accelerometer sample
+    accel = _vector(sc, "accelerometer_m_s2", path, "sensor_combined")[accel_valid]
+    accel_time = _seconds((sc["timestamp"] + accel_relative)[accel_valid])
     if "magnetometer_ga[0]" in sc:
         layout = "older"
         valid = sc["magnetometer_timestamp_relative"] != RELATIVE_TIMESTAMP_INVALID
