@@ -97,8 +97,8 @@ def under(path: LeafPath, prefixes: tuple[str, ...]) -> bool:
 
 
 def changed(path: LeafPath, value, cfg, tmp_path: Path):
-    """Another value of the same kind. A file path is changed to a copy of the file it names (the
-    same bytes under another name): a key that follows only the bytes would miss that."""
+    """Another value of the same kind. A log path is changed to a copy of the log under another
+    name (a path must name a readable log; the name is in the replay's labels)."""
     if path[-1] == "path" and path[0] == "source":
         copied = tmp_path / "copied.ulg"
         if not copied.exists():
