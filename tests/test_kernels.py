@@ -336,3 +336,75 @@ def test_a_bad_backend_is_a_one_line_config_error(monkeypatch):
 
     with pytest.raises(ConfigError, match="QUADEST_KERNELS"):
         validate_run(Run)
+
+
+# --- the quadrotor model's compiled f and h ---
+
+
+@pytest.fixture(scope="module", params=["thesis", "augmented"])
+def quadrotor(request):
+    from helpers import compose_config
+    from quadest.models.quadrotor_data import build_quadrotor_data
+
+    return build_quadrotor_data(compose_config([f"model.formulation={request.param}", "runs=4", "duration=0.2"]))
+
+
+def quadrotor_points(data, seed: int = 0):
+    """Sigma-point-like clouds (B, 13, n) about the initial states, with components of both signs
+    (the asymmetry term acts with the sign), and the filter inputs (B, nu) with spread angles."""
+    model, rng = data.model, np.random.default_rng(seed)
+    x = data.x0[:, None, :] + 0.5 * rng.standard_normal((data.x0.shape[0], 13, model.n))
+    u = model.filter_input(data.inputs[:, 0], data.companion_truth[:, 0])
+    if model.thesis:
+        u[:, 4:7] += 0.3 * rng.standard_normal((u.shape[0], 3))
+    return x, u
+
+
+@pytest.mark.parametrize("calibrated", [True, False])
+def test_quadrotor_f_and_h_kernels_agree_with_numpy(quadrotor, calibrated):
+    """Each output is the reference's expression term by term; what may differ is libm's sine and
+    cosine against numpy's (about an ulp each) and the order of the three-term triad products, so
+    the difference is a few eps times the magnitudes involved: 32 eps (|x| + |out|) per run."""
+    from quadest.sensors.mimu import TriadErrors
+
+    model = quadrotor.model
+    if not calibrated:
+        model = model.select(slice(None))
+        model.accel_errors = model.gyro_errors = TriadErrors.nominal(model.batch_size)
+    x, u = quadrotor_points(quadrotor)
+    for name in ("f", "h"):
+        out, ref = getattr(model, name)(x, u), getattr(model, f"{name}_numpy")(x, u)
+        tol = 32 * EPS * (np.abs(x).max(axis=(1, 2)) + np.abs(ref).max(axis=(1, 2)))
+        assert (per_run_error(out, ref) <= tol).all(), name
+
+
+def test_quadrotor_kernels_run_on_the_numba_backend_only(quadrotor, monkeypatch):
+    """The compiled f/h are used for real points of the model's runs; complex steps (the Jacobians),
+    other shapes and ``QUADEST_KERNELS=numpy`` take the numpy reference."""
+    from quadest.models import quadrotor_kernels
+
+    calls = []
+    real_f = quadrotor_kernels.quadrotor_f
+    monkeypatch.setattr(quadrotor_kernels, "quadrotor_f", lambda *a: calls.append("f") or real_f(*a))
+    model = quadrotor.model
+    x, u = quadrotor_points(quadrotor)
+    model.f(x, u)
+    assert calls == ["f"]
+    F = model.F_analytic(x[:, 0], u)
+    model.f(x[:2], u[:2])
+    assert calls == ["f"]
+    monkeypatch.setenv("QUADEST_KERNELS", "numpy")
+    model.f(x, u)
+    assert calls == ["f"]
+    np.testing.assert_array_equal(model.F_analytic(x[:, 0], u), F)
+
+
+def test_a_nan_point_of_the_quadrotor_model_stays_in_its_point(quadrotor):
+    model = quadrotor.model
+    x, u = quadrotor_points(quadrotor)
+    x[1, 5, 0] = np.nan
+    for name in ("f", "h"):
+        out = getattr(model, name)(x, u)
+        bad = ~np.isfinite(out).all(axis=-1)
+        np.testing.assert_array_equal(bad, ~np.isfinite(getattr(model, f"{name}_numpy")(x, u)).all(axis=-1))
+        assert bad.sum() == 1 and bad[1, 5]

@@ -22,9 +22,13 @@ error-free sensors (a mismatch experiment).
 
 from __future__ import annotations
 
+from functools import cache
+from types import ModuleType
+
 import numpy as np
 
 from quadest.models.base import FilterModel
+from quadest.numerics.square_root import kernel_backend
 from quadest.quadrotor.dynamics import (
     body_rates,
     euler_angle_accel_from_inputs,
@@ -44,6 +48,35 @@ from quadest.quadrotor.params import QuadrotorParams
 from quadest.sensors.mimu import TriadErrors
 
 FORMULATIONS = ("thesis", "augmented")
+
+
+@cache
+def _kernels() -> ModuleType | None:
+    """The compiled ``f``/``h``, or ``None`` when numba cannot be imported."""
+    try:
+        from quadest.models import quadrotor_kernels
+    except ImportError:
+        return None
+    return quadrotor_kernels
+
+
+def packed_params(params: QuadrotorParams) -> np.ndarray:
+    """``[b, d, l b, m, g, Jr, Kt (3), I (3), Kr (3)]``, the parameters as the compiled ``f``/``h`` take them."""
+    return np.array(
+        [
+            params.thrust_factor,
+            params.drag_factor,
+            params.arm * params.thrust_factor,
+            params.mass,
+            params.gravity,
+            params.rotor_inertia,
+            *params.translational_drag,
+            *params.inertia,
+            *params.rotational_drag,
+        ]
+    )
+
+
 _V = ("vx", "vy", "vz")
 _ANG = ("phi", "theta", "psi")
 _RATE = ("phi_dot", "theta_dot", "psi_dot")
@@ -95,6 +128,7 @@ class QuadrotorFilterModel(FilterModel):
         self.Q = np.asarray(Q, dtype=float)
         self.R = np.asarray(R, dtype=float)
         self._rate_slice = slice(3, 6) if self.thesis else slice(6, 9)
+        self._packed = packed_params(params)
 
     @staticmethod
     def formulation_state_names(formulation: str) -> tuple[str, ...]:
@@ -140,7 +174,27 @@ class QuadrotorFilterModel(FilterModel):
             return x[..., 0:3], u[:, None, 4:7], x[..., 3:6], speeds
         return x[..., 0:3], x[..., 3:6], x[..., 6:9], speeds
 
+    def _compiled(self, x: np.ndarray, u: np.ndarray) -> ModuleType | None:
+        """The compiled ``f``/``h`` (:mod:`quadest.models.quadrotor_kernels`) for real sigma points
+        (B, K, n) of this model's runs on the ``numba`` backend; ``None`` sends the call to numpy
+        (complex steps, other shapes, ``QUADEST_KERNELS=numpy``)."""
+        if x.dtype != np.float64 or u.dtype != np.float64 or x.ndim != 3 or u.shape != (x.shape[0], self.nu):
+            return None
+        if x.shape[0] != self.batch_size or kernel_backend() != "numba":
+            return None
+        return _kernels()
+
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """One step of the model (eq. 5.32): compiled for real sigma points, else :meth:`f_numpy`."""
+        kernels = self._compiled(x, u)
+        if kernels is None:
+            return self.f_numpy(x, u)
+        out = np.empty_like(x, order="C")
+        kernels.quadrotor_f(np.ascontiguousarray(x), np.ascontiguousarray(u), self._packed, self.thesis, self.dt, out)
+        return out
+
+    def f_numpy(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The numpy reference of :meth:`f` (any dtype, complex steps included)."""
         v, angles, rates, speeds = self._split(x, u)
         U, omega_r = rotor_inputs(self.params, speeds)
         T = self.dt
@@ -161,6 +215,24 @@ class QuadrotorFilterModel(FilterModel):
         return acc, gyro
 
     def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The MIMU measurement: compiled for real sigma points, else :meth:`h_numpy`."""
+        kernels = self._compiled(x, u)
+        if kernels is None:
+            return self.h_numpy(x, u)
+        out = np.empty((*x.shape[:2], self.m))
+        a, g = self.accel_errors, self.gyro_errors
+        kernels.quadrotor_h(
+            np.ascontiguousarray(x),
+            np.ascontiguousarray(u),
+            self._packed,
+            self.thesis,
+            *(np.ascontiguousarray(arr) for arr in (a.matrix, a.asymmetry, a.bias, g.matrix, g.asymmetry, g.bias)),
+            out,
+        )
+        return out
+
+    def h_numpy(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The numpy reference of :meth:`h` (any dtype, complex steps included)."""
         acc, gyro = self._ideal_measurement(x, u)
         return np.concatenate([self.accel_errors.apply(acc), self.gyro_errors.apply(gyro)], axis=-1)
 
