@@ -18,6 +18,8 @@ A wrong sign, a skipped pivot or a transposed factor all give differences of ord
 
 from __future__ import annotations
 
+import json
+import os
 import sys
 
 import numpy as np
@@ -408,3 +410,37 @@ def test_a_nan_point_of_the_quadrotor_model_stays_in_its_point(quadrotor):
         bad = ~np.isfinite(out).all(axis=-1)
         np.testing.assert_array_equal(bad, ~np.isfinite(getattr(model, f"{name}_numpy")(x, u)).all(axis=-1))
         assert bad.sum() == 1 and bad[1, 5]
+
+
+WARM_UP_SCRIPT = """
+import os
+import json, sys
+import numpy as np
+from quadest.estimators.srukf import SRUKF
+from quadest.models.functional import LinearGaussianModel
+SRUKF(LinearGaussianModel(np.eye(2), np.eye(2), np.eye(2), np.eye(2), dt=0.1), 0.5)
+compiled = sys.modules.get("quadest.numerics.compiled")
+names = ("qr_factor_kernel", "cholupdate_kernel", "kalman_gain_kernel", "whiten_kernel")
+print(json.dumps([name for name in names if compiled is not None and getattr(compiled, name).signatures]))
+"""
+
+
+@pytest.mark.parametrize(("backend", "loaded"), [("numba", 4), ("numpy", 0)])
+def test_building_an_estimator_loads_the_kernels_before_any_timed_step(backend, loaded):
+    """numba's first call in a process initialises its compiler (tenths of a second); the runner
+    times ``initialize`` and the steps, so the kernels are loaded when the estimator is built."""
+    import subprocess
+
+    env = {**os.environ, "QUADEST_KERNELS": backend}
+    out = subprocess.run([sys.executable, "-c", WARM_UP_SCRIPT], env=env, capture_output=True, text=True, check=True)
+    assert len(json.loads(out.stdout)) == loaded
+
+
+def test_building_an_estimator_loads_the_models_compiled_f_and_h(quadrotor, monkeypatch):
+    from quadest.models import quadrotor_kernels
+
+    calls = []
+    for name in ("quadrotor_f", "quadrotor_h"):
+        monkeypatch.setattr(quadrotor_kernels, name, lambda *a, name=name: calls.append(name))
+    SRUKF(quadrotor.model, 0.5)
+    assert calls == ["quadrotor_f", "quadrotor_h"]

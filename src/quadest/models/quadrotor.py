@@ -184,6 +184,12 @@ class QuadrotorFilterModel(FilterModel):
             return None
         return _kernels()
 
+    def warm_up_kernels(self) -> None:
+        """Load the compiled ``f``/``h`` now (see :func:`quadest.numerics.square_root.warm_up`)."""
+        x, u = np.zeros((self.batch_size, 1, self.n)), np.zeros((self.batch_size, self.nu))
+        self.f(x, u)
+        self.h(x, u)
+
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """One step of the model (eq. 5.32): compiled for real sigma points, else :meth:`f_numpy`."""
         kernels = self._compiled(x, u)

@@ -68,6 +68,28 @@ def _kernels() -> ModuleType | None:
     return _compiled() if kernel_backend() == "numba" else None
 
 
+def warm_up(model: object | None = None) -> None:
+    """Load the compiled kernels now (from numba's on-disk cache, compiling them if it is empty),
+    so that no timed filter step pays for it: numba's first call in a process also initialises its
+    compiler (docs/benchmarks.md gives the times). Also the model's compiled ``f``/``h``, for a
+    model that has them (``model.warm_up_kernels()``). Nothing happens on the numpy backend."""
+    if _kernels() is None:
+        return
+    _load_square_root_kernels()
+    if hasattr(model, "warm_up_kernels"):
+        model.warm_up_kernels()
+
+
+@cache
+def _load_square_root_kernels() -> None:
+    """One call of each square-root kernel on a batch of one 1 × 1 factor (same types as any call)."""
+    S = np.ones((1, 1, 1))
+    qr_factor(S)
+    cholupdate(S, S, 1.0)
+    kalman_gain(S, S)
+    whiten(S, S[:, 0])
+
+
 def _as_batch(a: np.ndarray, core: int) -> np.ndarray:
     """``a`` as a C-contiguous float64 array with one leading batch axis before ``core`` axes."""
     return np.ascontiguousarray(a, dtype=float).reshape((-1, *a.shape[a.ndim - core :]))
