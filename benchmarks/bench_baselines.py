@@ -14,7 +14,9 @@ run):
    ``h`` and ``H`` evaluated once per step for the whole batch);
 3. filterpy's EKF with the four model calls made per run (the previous adapter; what a batch of
    one costs either way);
-4. the model calls alone, at one point and for the whole batch.
+4. the model calls alone, at one point and for the whole batch;
+5. the SR-UKF (``estimator=srukf``) on the compiled kernels and on the numpy references
+   (``QUADEST_KERNELS=numba|numpy``, docs/benchmarks.md), for scale against the baselines.
 
 The ratios printed are EKF / UKF from this run, against both the UKF as ``estimator=ukf`` runs it
 now and the previous per-run adapter (the UKF step issue 14's target was set against).
@@ -24,13 +26,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 
 from bench_srukf import config, filter_inputs, time_steps
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF, FilterpyEKF
 from quadest.estimators.filterpy_ukf import BatchedFilterpyUKF, FilterpyUKF
+from quadest.estimators.srukf import SRUKF
 from quadest.models.registry import build_data
+from quadest.numerics.square_root import KERNELS_ENV
 
 RUNS = 50
 
@@ -67,13 +72,19 @@ def main() -> None:
         "ukf_per_point_us": per_run_us(lambda: PerRunAdapter(model, FilterpyUKF, alpha=0.5, vectorize_points=False), 1),
         "ekf_us": per_run_us(lambda: BatchedFilterpyEKF(model), 3),
         "ekf_per_run_calls_us": per_run_us(lambda: PerRunAdapter(model, FilterpyEKF)),
+        "srukf_us": per_run_us(lambda: SRUKF(model, alpha=0.5)),
     }
+    os.environ[KERNELS_ENV] = "numpy"
+    result["srukf_numpy_kernels_us"] = per_run_us(lambda: SRUKF(model, alpha=0.5))
+    os.environ.pop(KERNELS_ENV)
     x, u0 = data.x0, u[:, 0]
     one, x1, u1 = model.select(0), x[:1], u0[:1]
     calls = {
         "f": (lambda: one.f(x1[:, None], u1), lambda: model.f(x[:, None], u0)),
         "F": (lambda: one.F(x1, u1), lambda: model.F(x, u0)),
         "h": (lambda: one.h(x1[:, None], u1), lambda: model.h(x[:, None], u0)),
+        "f_numpy": (lambda: one.f_numpy(x1[:, None], u1), lambda: model.f_numpy(x[:, None], u0)),
+        "h_numpy": (lambda: one.h_numpy(x1[:, None], u1), lambda: model.h_numpy(x[:, None], u0)),
         "H": (lambda: one.H(x1, u1), lambda: model.H(x, u0)),
     }
     result["model_call_us"] = {
@@ -97,9 +108,11 @@ def main() -> None:
         f"  filterpy EKF, four model calls per run                 {result['ekf_per_run_calls_us']:8.1f}"
         f"   EKF/UKF {result['ekf_per_run_calls_over_ukf']:.2f}x"
     )
-    print("model calls, us per call (one point / the whole batch):")
+    print(f"  SR-UKF, compiled kernels (estimator=srukf)             {result['srukf_us']:8.1f}")
+    print(f"  SR-UKF, numpy references (QUADEST_KERNELS=numpy)       {result['srukf_numpy_kernels_us']:8.1f}")
+    print("model calls, us per call (one point / the whole batch; f and h compiled, *_numpy their references):")
     for name, times in result["model_call_us"].items():
-        print(f"  {name}  {times['one_point']:7.1f} / {times[f'batch_{RUNS}']:7.1f}")
+        print(f"  {name:8s} {times['one_point']:7.1f} / {times[f'batch_{RUNS}']:7.1f}")
     if args.json:
         rounded = {k: round(v, 3) if isinstance(v, float) else v for k, v in result.items()}
         calls_us = result["model_call_us"]

@@ -155,22 +155,30 @@ def cholupdate_runs(
 
 @njit(**_JIT)
 def kalman_gain_kernel(Pxy: np.ndarray, Sy: np.ndarray, K: np.ndarray) -> None:
-    """``K[b] Sy[b] Sy[b]ᵀ = Pxy[b]`` (eq. 5.26) row by row: ``Sy y = Pxy[b, i]`` forward, then
-    ``Syᵀ K[b, i] = y`` backward. ``Pxy`` (B, n, m), ``Sy`` (B, m, m) lower triangular."""
+    """``K[b] Sy[b] Sy[b]ᵀ = Pxy[b]`` (eq. 5.26) for every row ``i`` of ``K[b]``: ``Sy y = Pxy[b, i]``
+    forward, then ``Syᵀ K[b, i] = y`` backward. ``Pxy`` (B, n, m), ``Sy`` (B, m, m) lower triangular.
+
+    The rows are solved side by side (the loop over ``i`` innermost), so that their divisions are
+    independent and overlap in the processor; each element is computed as in a row-by-row solve,
+    ``y_r = (b_r − Σ_{c<r} Sy_rc y_c) / Sy_rr`` with the sum in increasing ``c``.
+    """
     B, n, m = Pxy.shape
-    y = np.empty(m)
+    Y = np.empty((n, m))
     for b in range(B):
-        for i in range(n):
-            for r in range(m):
+        for r in range(m):
+            d = Sy[b, r, r]
+            for i in range(n):
                 acc = Pxy[b, i, r]
                 for c in range(r):
-                    acc -= Sy[b, r, c] * y[c]
-                y[r] = acc / Sy[b, r, r]
-            for r in range(m - 1, -1, -1):
-                acc = y[r]
+                    acc -= Sy[b, r, c] * Y[i, c]
+                Y[i, r] = acc / d
+        for r in range(m - 1, -1, -1):
+            d = Sy[b, r, r]
+            for i in range(n):
+                acc = Y[i, r]
                 for c in range(r + 1, m):
                     acc -= Sy[b, c, r] * K[b, i, c]
-                K[b, i, r] = acc / Sy[b, r, r]
+                K[b, i, r] = acc / d
 
 
 @njit(**_JIT)
