@@ -11,6 +11,7 @@ import pytest
 from helpers import compose_config
 from quadest.config.validate import validate
 from quadest.errors import ConfigError
+from quadest.estimators.cubature import CKF5
 from quadest.estimators.registry import build_estimator
 from quadest.models.ins import InsFilterModel
 from quadest.models.ins_sensors import VisionAiding
@@ -180,3 +181,23 @@ def test_hf_is_the_experiments_ekf_plus_the_huber_update(tiny_data):
     hf = _run("hf", tiny_data, huber_threshold=1e12)
     np.testing.assert_allclose(hf.sq_error_sum, ekf.sq_error_sum, rtol=1e-9)
     assert not np.allclose(_run("hf", tiny_data).sq_error_sum, ekf.sq_error_sum, rtol=1e-6)
+
+
+def test_a_camera_update_that_loses_definiteness_flags_only_its_runs():
+    """The fifth-degree rule has negative weights for n = 15, so from large initial errors the
+    camera's innovation covariance (24 × 24, a named sensor; the INS's primary measurement has
+    none) can be indefinite in some runs. Those runs are flagged and the others keep their
+    Cholesky factor (the fallback once had the primary measurement's 0 × 0 shape, and the
+    exception failed every run of the batch)."""
+    cfg = compose_config([EXPERIMENT, "runs=3", "duration=0.1"])
+    est = CKF5(build_data(cfg).model)
+    x0 = np.zeros((3, 16))
+    x0[:, 0] = 1.0  # identity attitude quaternion
+    est.initialize(x0, np.broadcast_to(np.eye(15), (3, 15, 15)))
+    Pyy = np.broadcast_to(2.0 * np.eye(24), (3, 24, 24)).copy()
+    Pyy[1, 0, 0] = -1.0
+    Sy = est._innovation_factor(Pyy)
+    np.testing.assert_allclose(Sy[[0, 2]], np.sqrt(2.0) * np.eye(24)[None].repeat(2, 0), rtol=1e-15)
+    assert np.isfinite(Sy).all() and Sy.shape == (3, 24, 24)
+    assert est.failed.tolist() == [False, True, False]
+    assert est.failure_reasons[1] == "innovation covariance not positive definite"

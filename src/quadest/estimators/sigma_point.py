@@ -261,7 +261,9 @@ class SigmaPointKalmanFilter(SigmaPointFilter):
         Sy, bad = batched_cholesky(Pyy)
         if bad.any():
             self.flag(np.flatnonzero(bad), "innovation covariance not positive definite")
-            Sy[bad] = self._Sy[bad]
+            # a flagged run is quarantined after the update: its factor only has to be finite and of this
+            # measurement's size (the primary measurement's last factor, or I for a named sensor of another size)
+            Sy[bad] = self._Sy[bad] if self._Sy.shape[-1] == Sy.shape[-1] else np.eye(Sy.shape[-1])
         return Sy
 
     def _posterior(self, K, Pyy, DX, DY, dim: int, sqrt_R: np.ndarray | None) -> None:
