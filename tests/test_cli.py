@@ -202,9 +202,21 @@ def test_every_experiment_composes_and_validates(experiment):
 
     cfg = compose_config([f"experiment={experiment}"])
     validate(cfg)
+    models, runs = _experiment_model_and_runs(experiment)
+    assert cfg.model.name == models and cfg.runs == runs  # the file's settings reach the config
+
+
+def _experiment_model_and_runs(experiment: str) -> tuple[str, int]:
+    """The model and run count an experiment file sets, following the experiments it extends
+    (a plain name in its defaults list, e.g. ``seed003_rates_only`` on ``seed003_closed_loop``)."""
     spec = OmegaConf.load(Path(config_dir()) / "experiment" / f"{experiment}.yaml")
-    models = [d["override /model"] for d in spec.defaults if "override /model" in d]
-    assert cfg.model.name == models[0] and cfg.runs == spec.runs  # the file's settings reach the config
+    model, runs = None, None
+    for entry in spec.defaults:
+        if isinstance(entry, str) and entry != "_self_":
+            model, runs = _experiment_model_and_runs(entry)
+        elif "override /model" in entry:
+            model = entry["override /model"]
+    return model, spec.get("runs", runs)
 
 
 def _reject_constant(name: str):

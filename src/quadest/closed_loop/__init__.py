@@ -1,10 +1,12 @@
-"""The estimator in the control loop (issue 13, seed 003).
+"""The estimator in the control loop (seed 003).
 
 - :mod:`~quadest.closed_loop.config`: the ``loop`` key, the state sensor and the crash limits;
 - :mod:`~quadest.closed_loop.feedback`: what the controller reads (truth, noisy states, an estimate);
 - :mod:`~quadest.closed_loop.loop`: the plant flown under a controller and a feedback source;
 - :mod:`~quadest.closed_loop.control_metrics`: tracking, step-response and effort metrics;
 - :mod:`~quadest.closed_loop.quadrotor`: the quadrotor's closed-loop set-up;
+- :mod:`~quadest.closed_loop.seed003`: seed 003's arms (EKF in / EKF out) with its 5-state filter;
+- :mod:`~quadest.closed_loop.seed003_report`: seed 003's paired table;
 - :mod:`~quadest.closed_loop.job`: a job with ``loop`` other than ``open``;
 - :mod:`~quadest.closed_loop.report`: the sweep callback that tabulates the loop modes side by side.
 

@@ -11,7 +11,7 @@ from quadest.config.ranges import require_non_negative, require_positive
 from quadest.errors import ConfigError
 
 LOOPS = ("open", "truth", "measured", "estimate")
-CONTROLLED_MODELS = ("quadrotor",)  # models whose filter state the controller can fly on
+CONTROLLED_MODELS = ("quadrotor", "seed003_attitude")  # models whose filter state the controller can fly on
 
 
 @dataclass
@@ -36,7 +36,9 @@ class ClosedLoopConf:
     A run crashes when its roll or pitch exceeds ``max_tilt`` (rad), when it sinks ``ground_depth``
     (m) below the take-off plane, or when the controller's command is not finite. Settling time is
     measured to the ``settling_band`` (fraction of the step); the steady-state error is the mean
-    over the last ``steady_window`` seconds before the next step on that axis.
+    over the last ``steady_window`` seconds before the next step on that axis. ``transient_window``
+    (s) bounds the overshoot's peak to the transient after the step and adds the peak error after
+    it; ``None`` takes the peak over the whole interval to the next step (and no peak error).
     """
 
     state_sensor: StateSensorConf = field(default_factory=StateSensorConf)
@@ -44,6 +46,7 @@ class ClosedLoopConf:
     ground_depth: float = 0.05
     settling_band: float = 0.02
     steady_window: float = 1.0
+    transient_window: float | None = None
 
 
 def closed_loop_settings(node) -> ClosedLoopConf:
@@ -54,6 +57,7 @@ def closed_loop_settings(node) -> ClosedLoopConf:
         ground_depth=float(node.ground_depth),
         settling_band=float(node.settling_band),
         steady_window=float(node.steady_window),
+        transient_window=None if node.get("transient_window") is None else float(node.transient_window),
     )
 
 
@@ -77,3 +81,5 @@ def validate_loop(cfg) -> None:
     if not 0.0 < c.settling_band < 1.0:
         raise ConfigError("closed_loop.settling_band", c.settling_band, "must lie in (0, 1) (fraction of the step)")
     require_positive("closed_loop.steady_window", c.steady_window, "must be > 0 seconds")
+    if c.get("transient_window") is not None:
+        require_positive("closed_loop.transient_window", c.transient_window, "must be > 0 seconds, or null")

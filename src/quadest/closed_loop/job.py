@@ -27,6 +27,7 @@ from quadest.closed_loop.control_metrics import summarize_control
 from quadest.closed_loop.figures import plot_tracking
 from quadest.closed_loop.loop import Flight
 from quadest.closed_loop.quadrotor import QuadrotorLoop
+from quadest.closed_loop.seed003 import closed_loop_for
 from quadest.estimators.registry import build_estimator, estimator_parameters
 from quadest.formatting import markdown_table, strict_json
 from quadest.job_tables import estimator_entries, json_float, write_metric_tables
@@ -101,7 +102,7 @@ def run_closed_loop_job(cfg, out_dir: Path, overrides: list[str] | None, header:
     nodes = {label: OmegaConf.to_container(node, resolve=True) for label, node in cfg.estimator.items()}
     params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
     workers = int(cfg.workers) or multiprocessing.cpu_count()
-    loop = QuadrotorLoop.from_config(cfg)
+    loop = closed_loop_for(cfg)
 
     if mode == "estimate":
         outcomes = _parallel(_in_loop, [(loop, label, node, bound, saved, failed) for label, node in nodes.items()],

@@ -52,6 +52,7 @@ class QuadrotorLoop:
     events: list[StepEvent]
     band: float
     steady_window: float
+    transient_window: float | None
 
     @classmethod
     def from_config(cls, cfg) -> QuadrotorLoop:
@@ -72,6 +73,7 @@ class QuadrotorLoop:
             events=step_events(flown.steps, float(cfg.duration)) if isinstance(flown, AttitudeSteps) else [],
             band=settings.settling_band,
             steady_window=settings.steady_window,
+            transient_window=settings.transient_window,
         )
 
     def plant(self) -> QuadrotorPlant:
@@ -94,16 +96,27 @@ class QuadrotorLoop:
         tr = flight.truth
         out = control_metrics(
             tr.time, tr.state, self.reference_array(), tr.command, self.controller.params.hover_speed,
-            self.references[-1].attitude_mode, self.events, self.band, self.steady_window,
+            self.references[-1].attitude_mode, self.events, self.band, self.steady_window, self.transient_window,
         )  # fmt: skip
         return {key: np.where(flight.crashed, np.nan, value) for key, value in out.items()}
 
     def fly_shared(self, loop: str) -> tuple[Flight, MonteCarloData]:
         """``loop`` = ``truth`` or ``measured``: fly once and measure the flight as the open loop
         measures its truth (fresh streams, the same draws)."""
-        feedback = TruthFeedback() if loop == "truth" else StateSensorFeedback(self.state_std)
-        flight = fly(self.plant(), self.controller, self.references, feedback, self.limits)
-        return flight, record_quadrotor_data(self.cfg, self._streams(), self.flown, flight.truth)
+        flight = fly(self.plant(), self.controller, self.references, self.shared_feedback(loop), self.limits)
+        return flight, self.record(flight)
+
+    def shared_feedback(self, loop: str) -> TruthFeedback | StateSensorFeedback:
+        """What the controller reads with ``loop`` = ``truth`` or ``measured``."""
+        return TruthFeedback() if loop == "truth" else StateSensorFeedback(self.state_std)
+
+    def estimate_feedback(self, tracker: EstimatorTracker, plant: QuadrotorPlant) -> EstimateFeedback:
+        """What the controller reads with ``loop: estimate``."""
+        return EstimateFeedback(tracker, plant)
+
+    def record(self, flight: Flight) -> MonteCarloData:
+        """What the filters see of a shared flight: the open loop's measurements of its truth."""
+        return record_quadrotor_data(self.cfg, self._streams(), self.flown, flight.truth)
 
     def filter_model(self) -> QuadrotorFilterModel:
         """The filter model of the job, bound to the runs' assumed sensor errors."""
@@ -144,7 +157,7 @@ class QuadrotorLoop:
         tracker = EstimatorTracker(
             name, est, model, FilterStart.of(start_data), len(self.references) - 1, bound, saved_runs
         )
-        flight = fly(plant, self.controller, self.references, EstimateFeedback(tracker, plant), self.limits)
+        flight = fly(plant, self.controller, self.references, self.estimate_feedback(tracker, plant), self.limits)
         data = self._flight_data(model, flight.truth.state)
         own = replace(
             tracker.result(), truth=data.truth[:saved_runs], companion_truth=data.companion_truth[:saved_runs]

@@ -239,6 +239,7 @@ def register_schemas() -> None:
     cs.store(group="schema/model", name="ungm", node=UNGMModelConf)
     cs.store(group="schema/model", name="upf_benchmark", node=UPFBenchmarkModelConf)
     cs.store(group="schema/model", name="seed001_rates", node=Seed001RatesModelConf)
+    cs.store(group="schema/model", name="seed003_attitude", node=Seed003AttitudeModelConf)
     cs.store(group="schema/model", name="attitude", node=AttitudeModelConf)
     cs.store(group="schema/model", name="ins", node=InsModelConf)
     cs.store(group="schema/sensor", name="sensor", node=SensorConf)
@@ -273,6 +274,16 @@ class Seed001RatesModelConf(QuadrotorModelConf):
     Q: float = 0.1
     R: float = 0.1
     P0: float = 0.1
+
+
+@dataclass
+class Seed003AttitudeModelConf(QuadrotorModelConf):
+    """``model=seed003_attitude``: seed 003's 5-state filter (φ, θ, p, q, r) on the shared quadrotor
+    (:mod:`quadest.models.seed003_attitude`); ``Q`` and ``R`` are the five diagonal variances."""
+
+    name: str = "seed003_attitude"
+    Q: list[float] = field(default_factory=lambda: [2.0e-10, 2.0e-10, 4.0e-8, 4.0e-8, 4.0e-8])
+    R: list[float] = field(default_factory=lambda: [0.0012, 0.0012, 0.0076, 0.0076, 0.0076])
 
 
 @dataclass

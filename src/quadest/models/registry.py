@@ -11,6 +11,7 @@ from quadest.config.schema import (
     LinearModelConf,
     QuadrotorModelConf,
     Seed001RatesModelConf,
+    Seed003AttitudeModelConf,
     UNGMModelConf,
     UPFBenchmarkModelConf,
 )
@@ -20,6 +21,7 @@ from quadest.models.ins_data import build_ins_data, validate_ins
 from quadest.models.quadrotor import QuadrotorFilterModel
 from quadest.models.quadrotor_data import build_quadrotor_data
 from quadest.models.seed001_rates import build_seed001_rates_data, validate_seed001_rates
+from quadest.models.seed003_attitude import build_seed003_attitude_data, validate_seed003_attitude
 from quadest.models.upf_benchmark import build_upf_benchmark_data, validate_upf_benchmark
 from quadest.models.validation import build_linear_data, build_ungm_data
 from quadest.montecarlo import MonteCarloData
@@ -53,6 +55,9 @@ def model_specs() -> dict[str, ModelSpec]:
         ),
         "seed001_rates": ModelSpec(
             Seed001RatesModelConf, build_seed001_rates_data, lambda cfg: 3, validate_seed001_rates, True
+        ),
+        "seed003_attitude": ModelSpec(
+            Seed003AttitudeModelConf, build_seed003_attitude_data, lambda cfg: 5, validate_seed003_attitude, True
         ),
         "attitude": ModelSpec(AttitudeModelConf, build_attitude_data, lambda cfg: 9, validate_attitude, True),  # n_err
         "ins": ModelSpec(InsModelConf, build_ins_data, lambda cfg: 15, validate_ins, True),  # n_err

@@ -15,7 +15,11 @@ The controller reads whatever 16-state it is handed. In the open loop
 (:func:`~quadest.quadrotor.simulate.simulate_truth`) and with ``loop: truth`` that is the true
 state: an idealisation that matches neither arm of seed 003, whose baseline ("EKF out") feeds the
 controller the noisy measured states, and whose other arm feeds it the EKF's estimate. Those two
-are ``loop: measured`` and ``loop: estimate`` (:mod:`quadest.closed_loop`, docs/closed-loop.md).
+are ``loop: measured`` and ``loop: estimate`` (:mod:`quadest.closed_loop`, docs/closed-loop.md);
+with ``model=seed003_attitude`` only roll, pitch and the body rates are replaced (by the
+measurement or the estimate) and everything else is the truth (:mod:`quadest.closed_loop.seed003`).
+Seed 003's gains k1 = 6, k2 = 4 are the attitude pair (α1, α2) = (6, 4) of this law, whose error
+dynamics ``s² + (α1 + α2) s + 1 + α1 α2`` then have a double pole at −5 rad/s.
 """
 
 from __future__ import annotations
