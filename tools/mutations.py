@@ -275,11 +275,11 @@ MUTATIONS = (
          CACHE_KEYS + "test_a_job_recomputes_its_estimators_when_a_runner_setting_changes[divergence_bound]"),
     ),
     Mutation(
-        "estimator cache key leaves out the square-root kernels backend",
+        "cache keys leave out the compiled-kernels backend",
         "src/quadest/cache/keys.py",
         '            "kernels": kernel_backend(),\n',
         "",
-        (CACHE_KEYS + "test_the_square_root_kernels_backend_is_in_every_estimator_key",),
+        (CACHE_KEYS + "test_the_kernels_backend_is_in_every_key",),
     ),
     Mutation(
         "code version covers only the package's top-level modules",

@@ -7,12 +7,12 @@ three places:
 - :data:`RESULT_NEUTRAL`, the one declared list of settings that change no number (progress bars,
   processes, figures, the cache's own settings, ...): in no key;
 - the **estimator key**: the estimator's own node (``estimator.<label>``) and the runner settings
-  :data:`RUNNER_KEYS`, with the data key, the estimator's label, the backend of the square-root
-  numerics (``QUADEST_KERNELS``, an environment setting) and, for an estimator class from
+  :data:`RUNNER_KEYS`, with the data key, the estimator's label and, for an estimator class from
   outside the quadest package, the digest of that class's top-level package or module source
   (:func:`plugin_digest`; a class whose source cannot be found is never cached);
 - the **data key**: every other leaf (a new key too: an unknown key costs a cache miss, never a
-  wrong hit), plus :func:`code_version`.
+  wrong hit), plus :func:`code_version` and the backend of the compiled numerics
+  (``QUADEST_KERNELS``, an environment setting).
 
 ``tests/test_cache_keys_property.py`` checks this for every leaf of every config group option.
 """
@@ -62,7 +62,7 @@ NOT_DATA_KEYS = (*RESULT_NEUTRAL, *RUNNER_KEYS, ESTIMATORS)
 RESULT_LIBRARIES = ("numpy", "scipy", "filterpy", "pyulog", "ahrs", "numba")
 """Libraries whose version is part of the code version: the built-in filters compute with them, the
 replay reads its log with pyulog, the attitude anchors are the ``ahrs`` package's filters and numba
-compiles the square-root kernels (:mod:`quadest.numerics.compiled`)."""
+compiles the square-root kernels and the quadrotor model's ``f``/``h``."""
 
 
 def digest_text(material: Mapping[str, Any]) -> str:
@@ -161,8 +161,22 @@ def data_material(resolved: dict[str, Any]) -> dict[str, Any]:
 
 
 def resolved_data_key(resolved: dict[str, Any]) -> str:
-    """Key of the Monte Carlo data of the resolved job config ``resolved`` (a plain dict)."""
-    return digest_text({"format": FORMAT, "kind": "data", "code": code_version(), "config": data_material(resolved)})
+    """Key of the Monte Carlo data of the resolved job config ``resolved`` (a plain dict).
+
+    It also holds the backend of the compiled numerics (``QUADEST_KERNELS``, numba or numpy:
+    :func:`quadest.numerics.square_root.kernel_backend`), an environment setting read at every
+    call: the square-root kernels, which every estimator's NEES and NIS go through, and the
+    quadrotor model's compiled ``f``/``h`` agree with their numpy references only to round-off,
+    and their step times differ. Through the data key it reaches every estimator key."""
+    return digest_text(
+        {
+            "format": FORMAT,
+            "kind": "data",
+            "code": code_version(),
+            "kernels": kernel_backend(),
+            "config": data_material(resolved),
+        }
+    )
 
 
 def data_key(cfg) -> str:
@@ -174,12 +188,7 @@ def estimator_key(
     data: str, label: str, node: Mapping[str, Any], cls: type, divergence_bound: float, saved_runs: int
 ) -> str | None:
     """Key of the result of estimator ``label`` (resolved config ``node``, class ``cls``) on the
-    data of key ``data``; ``None`` if it must not be cached (a plugin without readable source).
-
-    It also holds the backend of the square-root numerics (``QUADEST_KERNELS``, numba or numpy:
-    :func:`quadest.numerics.square_root.kernel_backend`), which every estimator's NEES and NIS and
-    the square-root filters go through: the two agree to round-off only, and their step times differ.
-    The data does not use them."""
+    data of key ``data``; ``None`` if it must not be cached (a plugin without readable source)."""
     plugin = plugin_digest(cls)
     if plugin is None:
         return None
@@ -194,6 +203,5 @@ def estimator_key(
             "plugin": plugin,
             "divergence_bound": float(divergence_bound),
             "saved_runs": int(saved_runs),
-            "kernels": kernel_backend(),
         }
     )
