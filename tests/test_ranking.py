@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from quadest.aggregate.ranking import grouped_metrics, main, ranking_lines, step_time_ratios
+from quadest.aggregate.ranking import grouped_metrics, grouped_paired, main, ranking_lines, step_time_ratios
 
 RUNS = 30
 STATES = ("x", "y", "z", "vx", "vy", "vz", "error_angle")
@@ -37,6 +37,19 @@ def test_grouped_rmse_is_the_root_of_the_summed_axis_squares():
     assert np.isclose(row["position_3d"], s * np.sqrt(1 + 4 + 9), rtol=1e-14)
     assert np.isclose(row["velocity_3d"], s * np.sqrt(16 + 25 + 36), rtol=1e-14)
     assert np.isclose(row["error_angle"], 7 * s, rtol=1e-14)
+
+
+def test_a_run_diverged_in_one_filter_leaves_only_the_pairs_it_diverged_in():
+    """A diverged run has NaN RMSE in every state (metrics.csv); it must stay a row of the grouped
+    table so that the pairs without that filter still count all runs (dropping it made the runs of
+    two filters misalign, and the comparison failed)."""
+    metrics = _metrics()
+    gone = (metrics["estimator"] == "hckf") & (metrics["run"] == 5)
+    metrics.loc[gone, "rmse"], metrics.loc[gone, "diverged"] = np.nan, True
+    g = grouped_metrics(metrics)
+    assert len(g) == 4 * RUNS * 3 and g.loc[(g["estimator"] == "hckf") & (g["run"] == 5), "diverged"].all()
+    runs = grouped_paired(metrics).groupby("pair")["runs"].first()
+    assert runs["hckf - mekf"] == RUNS - 1 and runs["hhcf - hf"] == RUNS
 
 
 def test_verdicts_follow_the_sign_and_the_holm_corrected_test(tmp_path):

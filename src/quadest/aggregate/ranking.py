@@ -48,9 +48,11 @@ TIME_COLUMNS = (
 
 
 def grouped_metrics(metrics: pd.DataFrame) -> pd.DataFrame:
-    """One row per estimator × run × {position_3d, velocity_3d, error_angle}."""
+    """One row per estimator × run × {position_3d, velocity_3d, error_angle}; a diverged run
+    keeps its row (RMSE NaN, ``diverged`` true), so that every estimator has every run and the
+    paired comparison can leave the run out of each pair it diverged in."""
     keep = ["estimator", "run", "diverged"]
-    wide = metrics.pivot_table(index=["estimator", "run"], columns="state", values="rmse", sort=False)
+    wide = metrics.pivot_table(index=["estimator", "run"], columns="state", values="rmse", sort=False, dropna=False)
     diverged = metrics.groupby(["estimator", "run"], sort=False)["diverged"].any()
     rows = []
     for state, axes in GROUPS.items():
