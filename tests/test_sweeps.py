@@ -28,7 +28,7 @@ from quadest.config.validate import validate
 from quadest.estimators.registry import resolve
 from quadest.models.quadrotor_config import triad_spec
 from quadest.models.registry import build_data
-from quadest.montecarlo.streams import run_streams
+from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.testing import check_sigma_point_moments
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,21 +92,33 @@ def sweep_cells(name: str) -> list[dict[str, str]]:
 
 
 UT_KEYS = ("sweep.alpha", "sweep.beta", "sweep.kappa")
+PROBE_N = 4  # state dimension of quadest.testing's quadratic probe
+
+
+def _names_sweep_key(node, field: str, key: str) -> bool:
+    """Whether the estimator's unresolved ``node`` takes ``field`` from the sweep key ``key``."""
+    return f"${{{key}}}" in str(OmegaConf.to_container(node, resolve=False).get(field, ""))
 
 
 def check_ut_keys(name: str, cell: dict[str, str], cfg) -> None:
-    """Every selected estimator whose parameters are the UT's receives the cell's (α, β, κ) and
-    behaves as that UT on the quadratic probe of ``quadest.testing`` (its weights W0(c) hold β)."""
+    """Every selected estimator that takes its UT parameters from the sweep (``${sweep.alpha}``
+    ...) receives the cell's (α, β, κ) and behaves as that UT on the quadratic probe of
+    ``quadest.testing`` (its weights W0(c) hold β); at least one does. A UT filter that keeps its
+    own parameters (a baseline run once per sensor level, ``sweep_ut_grid``'s UKF) is not swept.
+    The probe has n = 4, so a κ ≤ −4 (the UT grid's −6 for its n = 9 model) is checked by value only."""
     swept = tuple(float(cell[k]) for k in UT_KEYS)
     ut_filters = 0
     for label, node in cfg.estimator.items():
         cls, params = resolve(label, OmegaConf.to_container(node, resolve=True))
         if not {"alpha", "beta", "kappa"} <= {f.name for f in dataclasses.fields(cls.Params)}:
             continue
+        if not any(_names_sweep_key(node, f, k) for f, k in zip(("alpha", "beta", "kappa"), UT_KEYS, strict=True)):
+            continue
         ut_filters += 1
         got = tuple(float(params.get(k, "nan")) for k in ("alpha", "beta", "kappa"))
         assert got == swept, f"{name} {cell}: estimator.{label} gets (alpha, beta, kappa) = {got}"
-        check_sigma_point_moments(cls, params, ut=swept)
+        if PROBE_N + swept[2] > 0:  # the probe's points exist (n + κ > 0 at its n = 4); at κ = −6 only the values
+            check_sigma_point_moments(cls, params, ut=swept)
     assert ut_filters, f"{name} {cell}: sweeps UT parameters but selects no UT filter"
 
 
@@ -169,12 +181,100 @@ def check_contamination_keys(name: str, cell: dict[str, str], cfg) -> None:
     np.testing.assert_allclose(data.measurements, expected, rtol=1e-12, atol=1e-12, err_msg=f"{name} {cell}")
 
 
+def check_process_noise_key(name: str, cell: dict[str, str], cfg) -> None:
+    """``model.Q`` of seed 001's rate model reaches both sides: every filter's Q is ``Q I₃``, and
+    the truth's increments ``x_k − f(x_{k−1}, Ω_{k−1})`` are √Q times the run's ``process`` stream
+    draws (the truth is driven by the swept noise, not only the filters' assumption)."""
+    q = float(cell["model.Q"])
+    data = build_data(cfg)
+    np.testing.assert_array_equal(data.model.Q, q * np.eye(3))
+    x, u = data.truth, data.inputs
+    increments = np.stack(
+        [x[:, k] - data.model.f(x[:, k - 1][:, None], u[:, k - 1])[:, 0] for k in range(1, x.shape[1])], 1
+    )
+    draws = np.stack(
+        [rng.standard_normal((x.shape[1], 3)) for rng in run_streams(int(cfg.seed), int(cfg.runs))["process"]]
+    )
+    np.testing.assert_allclose(increments, np.sqrt(q) * draws[:, 1:], rtol=0, atol=1e-12, err_msg=f"{name} {cell}")
+
+
+def check_huber_threshold_key(name: str, cell: dict[str, str], cfg) -> None:
+    """``sweep.gamma`` reaches the Huber threshold of every estimator that names it, and only those
+    (the plain filters of the comparison keep theirs); at least one is swept."""
+    gamma, swept = float(cell["sweep.gamma"]), 0
+    for label, node in cfg.estimator.items():
+        _, params = resolve(label, OmegaConf.to_container(node, resolve=True))
+        if _names_sweep_key(node, "huber_threshold", "sweep.gamma"):
+            swept += 1
+            assert float(params["huber_threshold"]) == gamma, f"{name} {cell}: estimator.{label}"
+    assert swept, f"{name} {cell}: sweeps gamma but no estimator takes it"
+
+
+def _error_offsets(cfg):
+    """(B, 15) offsets of the initial estimates from the truth, in the error state, and P0."""
+    data = build_data(cfg)
+    return data.model.boxminus(data.x0, data.truth[:, 0]), data.P0
+
+
+def check_initial_error_key(name: str, cell: dict[str, str], cfg) -> None:
+    """``sweep.initial_error`` selects a level whose one-sigma attitude and position errors become
+    the diagonal of P0 and scale the initial estimates' offsets from the truth: the same draws as
+    at the first level, times the ratio of the levels (error state: attitude, position, velocity,
+    gyro bias, accel bias, three each)."""
+    level = cfg.sweep.levels[cell["sweep.initial_error"]]
+    first = next(iter(cfg.sweep.levels))
+    base_cfg = compose_experiment(name, [f"sweep.initial_error={first}", "runs=1", "duration=0.05"])
+    offsets, P0 = _error_offsets(cfg)
+    base_offsets, base_P0 = _error_offsets(base_cfg)
+    for block, key in ((slice(0, 3), "attitude"), (slice(3, 6), "position")):
+        np.testing.assert_allclose(np.diag(P0)[block], float(level[key]) ** 2, rtol=1e-12)
+        ratio = float(level[key]) / float(cfg.sweep.levels[first][key])
+        np.testing.assert_allclose(offsets[:, block], ratio * base_offsets[:, block], rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(np.diag(P0)[6:], np.diag(base_P0)[6:])
+
+
+def check_vision_noise_key(name: str, cell: dict[str, str], cfg) -> None:
+    """``sensor.vision.los_noise`` reaches both sides: the camera's R in the filters is σ² I,
+    and its measurement error (measurement minus h of the truth) is σ times the error at σ = 1e-3
+    (the same draws, scaled; the contaminated law multiplies each draw by the same factor)."""
+    sigma = float(cell["sensor.vision.los_noise"])
+
+    def error(c):
+        data = build_data(c)
+        vision = data.model.sensors["vision"]
+        exact = np.stack([vision.h(data.truth[:, k], data.inputs[:, k]) for k in range(data.time.size)], 1)
+        return data, data.sensors["vision"].values - exact
+
+    data, err = error(cfg)
+    _, unit = error(compose_experiment(name, ["sensor.vision.los_noise=1e-3", "runs=1", "duration=0.05"]))
+    np.testing.assert_allclose(data.model.sensors["vision"].R, sigma**2 * np.eye(err.shape[-1]), rtol=1e-12)
+    seen = data.sensors["vision"].available
+    assert seen.any() and np.abs(err[:, seen]).max() > 0
+    np.testing.assert_allclose(err[:, seen], sigma / 1e-3 * unit[:, seen], rtol=1e-7, atol=1e-12)
+
+
+def check_seed_key(name: str, cell: dict[str, str], cfg) -> None:
+    """``seed`` reaches the run streams: the estimators' seed sequences are those of
+    :func:`run_seed_sequences` for the swept seed (entropy and spawn key)."""
+    seed = int(cell["seed"])
+    assert int(cfg.seed) == seed
+    data = build_data(cfg)
+    expected = run_seed_sequences(seed, int(cfg.runs))["estimator"]
+    got = [(s.entropy, s.spawn_key) for s in data.estimator_seeds]
+    assert got == [(s.entropy, s.spawn_key) for s in expected], f"{name} {cell}"
+
+
 KEY_CHECKS = {
     **dict.fromkeys(UT_KEYS, check_ut_keys),
     "sweep.epsilon": check_contamination_keys,
     "sweep.variance_factor": check_contamination_keys,
     "sensor": check_sensor_keys,
     "sensor.error_scale": check_sensor_keys,
+    "model.Q": check_process_noise_key,
+    "sweep.gamma": check_huber_threshold_key,
+    "sweep.initial_error": check_initial_error_key,
+    "sensor.vision.los_noise": check_vision_noise_key,
+    "seed": check_seed_key,
 }
 
 
@@ -185,9 +285,13 @@ def test_every_swept_key_reaches_what_it_names(name):
     cells = sweep_cells(name)
     unchecked = {key for cell in cells for key in cell} - set(KEY_CHECKS)
     assert not unchecked, f"{name}: no check says where {sorted(unchecked)} must arrive; add one to KEY_CHECKS"
-    for cell in cells:
-        cfg = compose_experiment(name, [*(f"{k}={v}" for k, v in cell.items()), "runs=1", "duration=0.05"])
-        for check in {KEY_CHECKS[key] for key in cell}:
+    for check in dict.fromkeys(KEY_CHECKS[key] for cell in cells for key in cell):
+        # a check runs once per distinct value of the keys it checks (the UT grid's 1000 cells
+        # hold 250 distinct (alpha, beta, kappa) and 4 sensor levels)
+        covered = [key for key, c in KEY_CHECKS.items() if c is check]
+        distinct = {tuple((k, cell[k]) for k in covered if k in cell): cell for cell in cells}
+        for cell in distinct.values():
+            cfg = compose_experiment(name, [*(f"{k}={v}" for k, v in cell.items()), "runs=1", "duration=0.05"])
             check(name, cell, cfg)
 
 
