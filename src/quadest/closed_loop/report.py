@@ -16,12 +16,18 @@ from quadest.closed_loop.figures import plot_tracking
 from quadest.formatting import markdown_table
 
 
-def _format(row: pd.Series) -> str:
-    if not np.isfinite(row["mean"]):
+def format_cell(mean: float, low: float, high: float, n: int, runs: int) -> str:
+    """``mean [low, high]`` to three digits, ``(n=…)`` when fewer than ``runs`` runs have a value,
+    ``-`` when none has."""
+    if not np.isfinite(mean):
         return "-"
-    ci = f" [{row['ci_lo']:.3g}, {row['ci_hi']:.3g}]" if np.isfinite(row["ci_lo"]) else ""
-    count = f" (n={row['n']})" if row["n"] < row["runs"] else ""
-    return f"{row['mean']:.3g}{ci}{count}"
+    ci = f" [{low:.3g}, {high:.3g}]" if np.isfinite(low) else ""
+    count = f" (n={n})" if n < runs else ""
+    return f"{mean:.3g}{ci}{count}"
+
+
+def _format(row: pd.Series) -> str:
+    return format_cell(row["mean"], row["ci_lo"], row["ci_hi"], row["n"], row["runs"])
 
 
 def control_report(sweep_dir: Path) -> Path:

@@ -24,6 +24,7 @@ from omegaconf import OmegaConf
 
 from quadest.closed_loop.control_metrics import mean_ci, step_events
 from quadest.closed_loop.figures import plot_tracking
+from quadest.closed_loop.report import format_cell
 from quadest.formatting import markdown_table
 from quadest.models.seed003_attitude import AttitudeRateModel, one_step_error_variance, seed003_filter_model
 
@@ -78,11 +79,7 @@ def _estimation_rows(job: Path) -> pd.DataFrame:
 
 
 def _cell(row: pd.Series) -> str:
-    if not np.isfinite(row["mean"]):
-        return "-"
-    ci = f" [{row['ci_low']:.3g}, {row['ci_high']:.3g}]" if np.isfinite(row["ci_low"]) else ""
-    count = f" (n={row['n']})" if row["n"] < row["runs"] else ""
-    return f"{row['mean']:.3g}{ci}{count}"
+    return format_cell(row["mean"], row["ci_low"], row["ci_high"], row["n"], row["runs"])
 
 
 def markdown(rows: pd.DataFrame) -> str:
