@@ -229,3 +229,22 @@ def test_summary_json_is_strict_json(tmp_path):
     small_job(tmp_path, "linear", ["model=linear", "estimator=[ekf]"])
     summary = json.loads((tmp_path / "linear" / "summary.json").read_text(), parse_constant=_reject_constant)
     assert summary["labels"]["error_scale"] is None
+
+
+def test_summary_json_names_the_code_that_made_it(tmp_path, monkeypatch):
+    """A commit alone does not name the code when the tree held uncommitted changes: the summary
+    says whether it did (``commit_dirty``) and carries the source digest (``code_version``), which
+    names the code in any tree; outside git the commit is unknown and dirtiness ``None``."""
+    from quadest import job
+    from quadest.cache.keys import code_version
+
+    small_job(tmp_path, "linear", ["model=linear", "estimator=[ekf]"])
+    summary = json.loads((tmp_path / "linear" / "summary.json").read_text())
+    assert summary["code_version"] == code_version() and summary["commit"] == job.git_commit()
+    answers = {"rev-parse": "abc", "status": " M src/quadest/job.py"}
+    monkeypatch.setattr(job, "_git", lambda *args: answers[args[0]])
+    assert job.provenance()["commit_dirty"] is True
+    answers["status"] = ""
+    assert job.provenance() == {"commit": "abc", "commit_dirty": False, "code_version": code_version()}
+    monkeypatch.setattr(job, "_git", lambda *args: None)
+    assert job.provenance()["commit"] == "unknown" and job.provenance()["commit_dirty"] is None

@@ -17,6 +17,7 @@ import numpy as np
 from omegaconf import OmegaConf
 from tqdm.auto import tqdm
 
+from quadest.cache.keys import code_version
 from quadest.cache.lookup import JobCache
 from quadest.closed_loop.job import run_closed_loop_job
 from quadest.config.validate import validate
@@ -42,15 +43,29 @@ from quadest.runner import EstimatorResult, run_estimator
 SCHEMA_VERSION = 1
 
 
+def _git(*args: str) -> str | None:
+    """``git ARGS`` in the package's folder: its output, or ``None`` outside a git checkout."""
+    try:
+        out = subprocess.run(["git", *args], cwd=Path(__file__).parent, capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() if out.returncode == 0 else None
+
+
 def git_commit() -> str:
     """The commit of the source tree, or ``"unknown"`` outside a git checkout."""
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True, timeout=5
-        )
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return out.stdout.strip() if out.returncode == 0 else "unknown"
+    return _git("rev-parse", "HEAD") or "unknown"
+
+
+def provenance() -> dict:
+    """What made a job's numbers, for its ``summary.json``: ``commit`` (HEAD of the checkout),
+    ``commit_dirty`` (whether tracked files differed from that commit, so the commit alone does
+    not name the code; ``None`` outside git) and ``code_version`` (the digest of the package source
+    and the numeric libraries' versions, :func:`quadest.cache.keys.code_version`, which names the
+    code in a dirty tree and outside git too)."""
+    status = _git("status", "--porcelain", "--untracked-files=no")
+    return {"commit": git_commit(), "commit_dirty": None if status is None else bool(status),
+            "code_version": code_version()}  # fmt: skip
 
 
 def failed_result(name: str, data: MonteCarloData, reason: str) -> EstimatorResult:
@@ -155,7 +170,7 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     """
     validate(cfg)
     if cfg.loop != "open":  # the controller flies on truth, noisy states or each estimate: docs/closed-loop.md
-        header = {"schema_version": SCHEMA_VERSION, "commit": git_commit()}
+        header = {"schema_version": SCHEMA_VERSION, **provenance()}
         return run_closed_loop_job(cfg, out_dir, overrides, header, failed_result)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -167,7 +182,7 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
     results, from_cache = run_estimators(cfg, data, nodes, saved_runs, cache)
     if "reference" in data.labels:  # a flight-log replay: differences to a reference, not errors (docs/replay.md)
-        header = {"schema_version": SCHEMA_VERSION, "status": "ok", "commit": git_commit(),
+        header = {"schema_version": SCHEMA_VERSION, "status": "ok", **provenance(),
                   "overrides": list(overrides or []), "cache": {"enabled": bool(cfg.cache.enabled),
                                                                 "data_from_cache": data_from_cache}}  # fmt: skip
         return write_replay_outputs(cfg, out_dir, data, results, params, header, from_cache)
@@ -203,7 +218,7 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     summary = {
         "schema_version": SCHEMA_VERSION,
         "status": "ok",
-        "commit": git_commit(),
+        **provenance(),
         "overrides": list(overrides or []),
         "labels": {**data.labels, "seed": int(cfg.seed), "runs": int(cfg.runs),
                    "duration": float(cfg.duration), "sample_period": float(cfg.sample_period)},
