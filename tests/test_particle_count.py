@@ -199,3 +199,32 @@ def test_sweep_command_writes_the_three_tables_and_refuses_a_folder_without_a_q_
     assert (tmp_path / NOISE_CHANGE).is_file() and (tmp_path / TIME_EFFICIENCY).is_file()
     assert main(["--sweep", str(tmp_path / "0")]) == 2
     assert "no sweep over model.Q" in capsys.readouterr().err
+
+
+def test_the_particle_count_callback_tabulates_the_run_and_a_sweep_over_q(tmp_path, capsys):
+    """``experiment=seed001_rates`` and its Q sweep are one command each: the callback writes what
+    ``python -m quadest.aggregate.particle_count`` writes (with ``--sweep`` for a multirun over
+    two or more Q) and leaves another multirun alone."""
+    from omegaconf import OmegaConf
+
+    from quadest.aggregate.callback import ParticleCountCallback
+
+    ekpf = [1.0, 2.0, 1.5]
+    job = tmp_path / "job"
+    job.mkdir()
+    _pair_metrics(ekpf, [v / 1.25 for v in ekpf], 100.0, 125.0).to_csv(job / "metrics.csv", index=False)
+    ParticleCountCallback().on_run_end(OmegaConf.create({"hydra": {"runtime": {"output_dir": str(job)}}}))
+    assert (job / EFFICIENCY).is_file()
+    sweep = tmp_path / "sweep"
+    for number, q in enumerate((0.05, 0.2)):
+        folder = sweep / str(number)
+        folder.mkdir(parents=True)
+        _pair_metrics(ekpf, [v * (1 + q) for v in ekpf], 10.0, 12.0, from_cache=False).to_csv(folder / "metrics.csv")
+        (folder / "config.yaml").write_text(f"seed: 5\nmodel:\n  Q: {q}\n")
+        pd.DataFrame(
+            {"estimator": ["ekpf_10", "ilopf_10"], "quantity": "filter", "mse_mean": [4.0, 9.0], "pcrlb": [1.0, 1.0]}
+        ).to_csv(folder / "rmse_summary.csv", index=False)
+    ParticleCountCallback().on_multirun_end(OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}}))
+    assert (sweep / NOISE_TREND).is_file() and (sweep / TIME_EFFICIENCY).is_file()
+    ParticleCountCallback().on_multirun_end(OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep / "0")}}}))
+    assert "not a sweep over model.Q" in capsys.readouterr().out

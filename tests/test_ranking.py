@@ -85,3 +85,32 @@ def test_step_time_ratio_is_the_geometric_mean_with_a_t_interval_over_jobs():
     np.testing.assert_allclose([row["ratio_ci_low"], row["ratio_ci_high"]], np.exp(logs.mean() + [-half, half]))
     np.testing.assert_allclose(row["rel_diff"], row["ratio"] - 1.0, rtol=0, atol=1e-15)
     assert list(step_time_ratios(times)["estimator"]) == ["hhcf"]
+
+
+def test_the_ranking_callback_tabulates_the_run_and_the_sweep_when_they_end(tmp_path, capsys):
+    """``experiment=seed004_landing`` (and the sweeps over it) is one command: its callback writes
+    what ``python -m quadest.aggregate.ranking`` writes, for a finished run, and skips a failed one."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from omegaconf import OmegaConf
+
+    from quadest.aggregate.callback import RankingCallback
+    from quadest.config.paths import config_dir
+    from quadest.config.schema import register_schemas
+
+    register_schemas()
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=["experiment=seed004_landing"], return_hydra_config=True)
+    GlobalHydra.instance().clear()
+    callbacks = cfg.hydra.callbacks
+    assert callbacks.ranking._target_ == "quadest.aggregate.callback.RankingCallback"
+    job = tmp_path / "job"
+    job.mkdir()
+    _metrics().to_csv(job / "metrics.csv", index=False)
+    RankingCallback().on_run_end(OmegaConf.create({"hydra": {"runtime": {"output_dir": str(job)}}}))
+    assert (job / "ranking.md").read_text().splitlines()[:3] == ranking_lines(_metrics())[:3]
+    failed = tmp_path / "failed"
+    failed.mkdir()
+    RankingCallback().on_run_end(OmegaConf.create({"hydra": {"runtime": {"output_dir": str(failed)}}}))
+    assert "the job failed" in capsys.readouterr().out and not (failed / "ranking.md").exists()

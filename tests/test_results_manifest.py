@@ -62,3 +62,67 @@ def test_list_runs_nothing(capsys):
 def test_unknown_folder_is_refused(capsys):
     assert load_tool().main(["--only", "no_such_folder"]) == 2
     assert "allowed" in capsys.readouterr().err
+
+
+def _compose_command(command: str):
+    """The task config a manifest command would run: its config (``-cd``/``-cn`` or the root
+    config) with its overrides, less the Hydra settings and the multirun flag; a swept override
+    takes its first value (the first job of the multirun)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from quadest.config.paths import config_dir
+    from quadest.config.schema import register_schemas
+
+    argv = shlex.split(command)[1:]
+    folder, name, overrides = config_dir(), "config", []
+    while argv:
+        arg = argv.pop(0)
+        if arg == "-cd":
+            folder = str(ROOT / argv.pop(0))
+        elif arg == "-cn":
+            name = argv.pop(0)
+        elif arg != "-m" and not arg.startswith("hydra."):
+            parsed = OverridesParser.create().parse_override(arg)
+            first = next(parsed.sweep_string_iterator()) if parsed.is_sweep_override() else None
+            overrides.append(arg if first is None else f"{parsed.key_or_group}={first}")
+    register_schemas()
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=folder, version_base="1.3"):
+        cfg = compose(config_name=name, overrides=overrides)
+    GlobalHydra.instance().clear()
+    return cfg
+
+
+def test_every_manifest_command_composes_and_validates():
+    """A regeneration must not stop on a config name or key that no longer exists: each command
+    composes and passes the same validation the CLI runs before any work."""
+    from quadest.config.validate import validate
+
+    for commands in load_tool().read_manifest().values():
+        for command in commands:
+            if command.startswith("quadest "):
+                validate(_compose_command(command))
+
+
+def test_regeneration_keeps_the_folder_readme_no_command_makes(tmp_path, monkeypatch):
+    """A folder's hand-written README.md survives its regeneration; every other old file goes."""
+    tool = load_tool()
+    folder = tmp_path / "results" / "demo"
+    (folder / "sub").mkdir(parents=True)
+    (folder / "README.md").write_text("what this folder is")
+    (folder / "sub" / "README.md").write_text("and this one")
+    (folder / "stale.csv").write_text("old")
+    monkeypatch.setattr(tool, "ROOT", tmp_path)
+
+    def fake_run(command: str) -> bool:
+        folder.mkdir(parents=True)
+        (folder / "fresh.csv").write_text("new")
+        return True
+
+    monkeypatch.setattr(tool, "run", fake_run)
+    assert tool.regenerate("demo", ["quadest whatever"])
+    assert sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()) == [
+        "README.md", "fresh.csv", "sub/README.md",
+    ]  # fmt: skip

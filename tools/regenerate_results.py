@@ -53,7 +53,9 @@ def run(command: str) -> bool:
 
 
 def regenerate(name: str, commands: list[str]) -> bool:
-    """Make ``results/name`` afresh; the old folder comes back if a command fails."""
+    """Make ``results/name`` afresh; the old folder comes back if a command fails. The folder's
+    ``README.md`` files, written by hand to explain a folder (no command makes them), are carried
+    over into the new one."""
     folder = ROOT / "results" / name
     aside = folder.with_name(f".{name}.old")
     shutil.rmtree(aside, ignore_errors=True)
@@ -61,6 +63,11 @@ def regenerate(name: str, commands: list[str]) -> bool:
         folder.rename(aside)
     ok = all(run(command) for command in commands)
     if ok:
+        for readme in aside.rglob("README.md") if aside.exists() else ():
+            target = folder / readme.relative_to(aside)
+            if not target.exists():
+                target.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(readme, target)
         shutil.rmtree(aside, ignore_errors=True)
     elif aside.exists():
         shutil.rmtree(folder, ignore_errors=True)

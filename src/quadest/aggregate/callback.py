@@ -1,5 +1,14 @@
-"""The Hydra callback that aggregates a sweep when its multirun ends (``hydra.callbacks`` in an
-experiment file: ``_target_: quadest.aggregate.callback.AggregateCallback``)."""
+"""The Hydra callbacks that finish an experiment when its run or multirun ends (``hydra.callbacks``
+in an experiment file), so that one command makes every file the docs and the ledger read:
+
+- :class:`AggregateCallback`: aggregate a sweep (:func:`quadest.aggregate.report.aggregate`);
+- :class:`RankingCallback`: seed 004's ranking of a job or a sweep (:mod:`quadest.aggregate.ranking`);
+- :class:`ParticleCountCallback`: seed 001's particle-count figure and efficiency of a job, and the
+  process-noise trend of a sweep over ``model.Q`` (:mod:`quadest.aggregate.particle_count`).
+
+Each does what its command line does (``python -m quadest.aggregate.ranking DIR``, ...), which
+stays for folders made elsewhere.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +16,17 @@ from pathlib import Path
 
 from hydra.experimental.callback import Callback
 
+from quadest.aggregate import particle_count, ranking
 from quadest.aggregate.report import aggregate
+
+
+def _finished_job(config) -> Path | None:
+    """The run's output folder if its job wrote ``metrics.csv``; ``None`` after a one-line note."""
+    job = Path(config.hydra.runtime.output_dir)
+    if (job / "metrics.csv").is_file():
+        return job
+    print(f"{job}: no metrics.csv (the job failed); nothing to tabulate")
+    return None
 
 
 class AggregateCallback(Callback):
@@ -16,3 +35,33 @@ class AggregateCallback(Callback):
     def on_multirun_end(self, config, **kwargs) -> None:
         report = aggregate(Path(config.hydra.sweep.dir))
         print(f"Aggregated: {report}")
+
+
+class RankingCallback(Callback):
+    """Hydra callback: ``ranking.md``, ``paired_grouped.csv`` and ``step_time.csv`` of the job when a
+    run ends, or of the sweep (into ``aggregate/``) when a multirun ends."""
+
+    def on_run_end(self, config, **kwargs) -> None:
+        job = _finished_job(config)
+        if job is not None:
+            ranking.main([str(job)])
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        ranking.main([str(config.hydra.sweep.dir)])
+
+
+class ParticleCountCallback(Callback):
+    """Hydra callback: the job's ``rmse_vs_particles.csv``, figure and ``efficiency.csv`` when a
+    run ends; a multirun over two or more values of ``model.Q`` gets the sweep's trend tables."""
+
+    def on_run_end(self, config, **kwargs) -> None:
+        job = _finished_job(config)
+        if job is not None:
+            particle_count.main([str(job)])
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        sweep = Path(config.hydra.sweep.dir)
+        if len({q for q, *_ in particle_count.read_sweep(sweep)}) >= 2:
+            particle_count.sweep_main(sweep)
+        else:
+            print(f"{sweep}: not a sweep over model.Q; no trend tables")

@@ -11,6 +11,10 @@ the verdict follows from the interval and the claim's ``expect`` rule:
 - ``{within: [lo, hi]}``: reproduced when the whole CI lies inside ``[lo, hi]``;
 - ``{contains: x}``: reproduced when the CI contains ``x``.
 
+A measure may also name a column ``p`` holding a multiplicity-corrected p-value (the Holm-corrected
+Wilcoxon p of a ranking, say): then the claim is reproduced only when, besides the CI rule,
+``p < 0.05`` (:data:`SIGNIFICANCE`), so that a ranking claim rests on the same test the ranking does.
+
 Anything else is *not reproduced*, and then the entry must give the ``cause`` we found for the
 difference (a claim file without one is an error). A claim marked ``testable: false`` gives
 ``why`` instead and is listed as *not testable here*.
@@ -33,9 +37,11 @@ import pandas as pd
 import yaml
 
 CLAIM_KEYS = {"claim", "where", "source_value", "command", "measure", "expect", "cause", "testable", "why"}
-MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit"}
+MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit", "p"}
 EXPECT_KINDS = ("below", "above", "within", "contains")
 REPRODUCED, NOT_REPRODUCED, NOT_TESTABLE = "reproduced", "not reproduced", "not testable here"
+SIGNIFICANCE = 0.05
+"""The level a measure's ``p`` column must fall below for a reproduction."""
 
 
 class ClaimError(ValueError):
@@ -50,6 +56,7 @@ class Reading:
     low: float
     high: float
     unit: str
+    p: float | None = None
 
 
 @dataclass(frozen=True)
@@ -87,13 +94,14 @@ def read_measure(measure: dict, root: Path, label: str) -> Reading:
     row = rows.iloc[0]
     scale = float(measure.get("scale", 1.0))
     columns = [measure["value"], *(measure.get("ci") or [measure["value"]] * 2)]
-    missing = [c for c in columns if c not in table.columns]
+    missing = [c for c in [*columns, *([measure["p"]] if "p" in measure else [])] if c not in table.columns]
     if missing:
         raise ClaimError(f"{label}: column(s) {missing} are not in {measure['file']}")
     value, low, high = (float(row[c]) * scale for c in columns)
     if scale < 0:
         low, high = high, low
-    return Reading(value, low, high, str(measure.get("unit", "")))
+    p = float(row[measure["p"]]) if "p" in measure else None
+    return Reading(value, low, high, str(measure.get("unit", "")), p)
 
 
 def verdict(reading: Reading, expect: dict, label: str) -> str:
@@ -110,6 +118,8 @@ def verdict(reading: Reading, expect: dict, label: str) -> str:
         holds = float(bound[0]) <= low and high <= float(bound[1])
     else:
         holds = low <= float(bound) <= high
+    if reading.p is not None:
+        holds = holds and reading.p < SIGNIFICANCE
     return REPRODUCED if holds else NOT_REPRODUCED
 
 
@@ -122,16 +132,19 @@ def format_number(x: float) -> str:
 
 def format_reading(reading: Reading) -> str:
     unit = f" {reading.unit}" if reading.unit else ""
+    p = "" if reading.p is None else f", p = {format_number(reading.p)}"
     if reading.low == reading.high == reading.value:
-        return f"{format_number(reading.value)}{unit}"
-    return f"{format_number(reading.value)}{unit} [{format_number(reading.low)}, {format_number(reading.high)}]"
+        return f"{format_number(reading.value)}{unit}{p}"
+    return f"{format_number(reading.value)}{unit} [{format_number(reading.low)}, {format_number(reading.high)}]{p}"
 
 
-def expectation_text(expect: dict) -> str:
+def expectation_text(expect: dict, tested: bool = False) -> str:
     kind, bound = next(iter(expect.items()))
     if kind == "within":
-        return f"CI within [{bound[0]}, {bound[1]}]"
-    return {"below": "CI below {}", "above": "CI above {}", "contains": "CI contains {}"}[kind].format(bound)
+        text = f"CI within [{bound[0]}, {bound[1]}]"
+    else:
+        text = {"below": "CI below {}", "above": "CI above {}", "contains": "CI contains {}"}[kind].format(bound)
+    return f"{text} and p < {SIGNIFICANCE}" if tested else text
 
 
 def build_entry(claim: dict, root: Path, label: str) -> Entry:
@@ -154,7 +167,7 @@ def build_entry(claim: dict, root: Path, label: str) -> Entry:
     cause = str(claim.get("cause", "")).strip()
     if result != REPRODUCED and not cause:
         raise ClaimError(f"{label}: not reproduced ({format_reading(reading)}), so 'cause' is required")
-    ours = f"{format_reading(reading)}; reproduced if {expectation_text(claim['expect'])}"
+    ours = f"{format_reading(reading)}; reproduced if {expectation_text(claim['expect'], reading.p is not None)}"
     return Entry(claim["claim"], claim["where"], str(claim["source_value"]), claim["command"], ours, result, cause)
 
 

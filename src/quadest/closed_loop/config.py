@@ -17,7 +17,8 @@ CONTROLLED_MODELS = ("quadrotor", "seed003_attitude")  # models whose filter sta
 @dataclass
 class StateSensorConf:
     """``closed_loop.state_sensor``: one-sigma white noise per sample on what the controller reads
-    with ``loop: measured``; seed 003: 5 °/s on the body rates, 2° on the angles."""
+    with ``loop: measured``; seed 003's levels: 5 °/s on the body rates, 2° on the angles (Euler
+    angles here; seed 003's 2° is on its airflow angles α, β)."""
 
     position: float = 0.0
     velocity: float = 0.0

@@ -2,8 +2,8 @@
 
 - ``truth``: the true state (today's flight; the estimators only watch);
 - ``measured``: the true state plus the state sensor's white noise on position, velocity, Euler
-  angles and body rates (seed 003: σ = 5 °/s on the rates, 2° on the angles), rotor speeds from
-  the encoders;
+  angles and body rates (seed 003's levels: σ = 5 °/s on the rates, 2° on the angles, which in
+  seed 003 are its airflow angles α, β), rotor speeds from the encoders;
 - ``estimate``: the estimator's own estimate; what the filter state lacks comes from its
   companion integration (thesis §5.3.1: positions, and for the thesis formulation the Euler
   angles, integrated from the estimated rates), rotor speeds from the encoders.
