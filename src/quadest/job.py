@@ -59,11 +59,12 @@ def git_commit() -> str:
 
 def provenance() -> dict:
     """What made a job's numbers, for its ``summary.json``: ``commit`` (HEAD of the checkout),
-    ``commit_dirty`` (whether tracked files differed from that commit, so the commit alone does
-    not name the code; ``None`` outside git) and ``code_version`` (the digest of the package source
-    and the numeric libraries' versions, :func:`quadest.cache.keys.code_version`, which names the
-    code in a dirty tree and outside git too)."""
-    status = _git("status", "--porcelain", "--untracked-files=no")
+    ``commit_dirty`` (whether the tracked code differed from that commit: the package source, the
+    configs and the sweep files, ``src/``, ``conf/``, ``experiments/``; results being rewritten do
+    not count; ``None`` outside git) and ``code_version`` (the digest of the package source and
+    the numeric libraries' versions, :func:`quadest.cache.keys.code_version`, which names the code
+    in a dirty tree and outside git too)."""
+    status = _git("status", "--porcelain", "--untracked-files=no", "--", ":/src", ":/conf", ":/experiments")
     return {"commit": git_commit(), "commit_dirty": None if status is None else bool(status),
             "code_version": code_version()}  # fmt: skip
 
