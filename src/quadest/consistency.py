@@ -1,4 +1,5 @@
-"""χ² consistency of a filter over Monte Carlo runs (``../shared/reference/estimators.md``).
+"""χ² consistency of a filter over Monte Carlo runs (Bar-Shalom, Li & Kirubarajan 2001, §5.4:
+the NEES and NIS tests; docs/verification.md).
 
 NEES ``x̃ᵀP⁻¹x̃`` is χ²(n) and NIS ``νᵀS⁻¹ν`` is χ²(m) when the filter is consistent. Averaged
 over N runs, ``N·ε̄ ~ χ²(N·d)``, so the two-sided 95 % band of the run-average is

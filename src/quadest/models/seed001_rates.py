@@ -32,7 +32,7 @@ from quadest.models.quadrotor_data import fly_scenario
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
-from quadest.quadrotor.dynamics import body_angular_accel, rotor_inputs
+from quadest.quadrotor.dynamics import body_angular_accel, body_rate_jacobian, rotor_inputs
 from quadest.quadrotor.params import QuadrotorParams
 
 RATES = slice(9, 12)  # body rates p, q, r in the 16-state truth
@@ -63,18 +63,8 @@ class RateModel(FilterModel):
     def F_points(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``I + T ∂ω̇/∂ω`` at every point (B, K, 3, 3), from the Euler equation of
         :func:`~quadest.quadrotor.dynamics.body_angular_accel`."""
-        ix, iy, iz = self.params.inertia
-        kr = self.params.kr
-        jw = self.params.rotor_inertia * rotor_inputs(self.params, u)[1][:, None]  # (B, 1)
-        p, q, r = x[..., 0], x[..., 1], x[..., 2]
-        zero = np.zeros_like(p)
-        rows = [
-            [zero - kr[0] / ix, ((iy - iz) * r - jw) / ix, (iy - iz) * q / ix],
-            [((iz - ix) * r + jw) / iy, zero - kr[1] / iy, (iz - ix) * p / iy],
-            [(ix - iy) * q / iz, (ix - iy) * p / iz, zero - kr[2] / iz],
-        ]
-        J = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in rows], axis=-2)
-        return np.eye(3) + self.dt * J
+        omega_r = rotor_inputs(self.params, u)[1][:, None]  # (B, 1)
+        return np.eye(3) + self.dt * body_rate_jacobian(self.params, x, omega_r)
 
     def F_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return self.F_points(x[:, None, :], u)[:, 0]

@@ -37,7 +37,7 @@ from quadest.models.config_checks import validate_quadrotor
 from quadest.models.quadrotor_data import fly_scenario
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
-from quadest.quadrotor.dynamics import body_angular_accel, rotor_inputs
+from quadest.quadrotor.dynamics import body_angular_accel, body_rate_jacobian, euler_rates, rotor_inputs
 from quadest.quadrotor.params import QuadrotorParams
 
 SLOTS = np.array([6, 7, 9, 10, 11])  # φ, θ, p, q, r in the 16-state truth (and in the state sensor's 12 normals)
@@ -62,10 +62,9 @@ class AttitudeRateModel(FilterModel):
     def derivative(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Continuous ``ẋ`` (B, K, 5) at ``x`` (B, K, 5) under rotor speeds ``u`` (B, 4)."""
         U, omega_r = rotor_inputs(self.params, u)
-        phi, theta, p, q, r = np.moveaxis(x, -1, 0)
         out = np.empty_like(x)
-        out[..., 0] = p + np.tan(theta) * (q * np.sin(phi) + r * np.cos(phi))
-        out[..., 1] = q * np.cos(phi) - r * np.sin(phi)
+        # euler_rates reads φ and θ of its angles only: x[..., :3] = (φ, θ, p) fills ψ's slot
+        out[..., 0:2] = euler_rates(x[..., :3], x[..., 2:5])[..., :2]
         out[..., 2:5] = body_angular_accel(self.params, x[..., 2:5], U[:, None, 1:4], omega_r[:, None])
         return out
 
@@ -77,18 +76,13 @@ class AttitudeRateModel(FilterModel):
 
     def continuous_jacobian(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``F = ∂ẋ/∂x`` (B, 5, 5) at ``x`` (B, 5) (seed 003 eq. 12, our states)."""
-        ix, iy, iz = self.params.inertia
-        kr = self.params.kr
-        jw = self.params.rotor_inertia * rotor_inputs(self.params, u)[1]
         phi, theta, p, q, r = x.T
         sf, cf, tt = np.sin(phi), np.cos(phi), np.tan(theta)
         J = np.zeros((x.shape[0], 5, 5))
         J[:, 0] = np.stack([tt * (q * cf - r * sf), (q * sf + r * cf) / np.cos(theta) ** 2, np.ones_like(p),
                             sf * tt, cf * tt], axis=-1)  # fmt: skip
         J[:, 1, 0], J[:, 1, 3], J[:, 1, 4] = -q * sf - r * cf, cf, -sf
-        J[:, 2, 2:5] = np.stack([np.full_like(p, -kr[0]), (iy - iz) * r - jw, (iy - iz) * q], axis=-1) / ix
-        J[:, 3, 2:5] = np.stack([(iz - ix) * r + jw, np.full_like(p, -kr[1]), (iz - ix) * p], axis=-1) / iy
-        J[:, 4, 2:5] = np.stack([(ix - iy) * q, (ix - iy) * p, np.full_like(p, -kr[2])], axis=-1) / iz
+        J[:, 2:5, 2:5] = body_rate_jacobian(self.params, x[:, 2:5], rotor_inputs(self.params, u)[1])
         return J
 
     def F_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -184,5 +178,6 @@ def one_step_error_variance(model: AttitudeRateModel, truth: np.ndarray) -> np.n
     (B, K+1, 16): ``x_{k+1} − f(x_k, Ω_k)`` with the true states and rotor speeds, the error the
     process noise Q stands for."""
     x, u = model.truth_to_state(truth), truth[..., ROTORS]
-    predicted = np.stack([model.f(x[:, k, None], u[:, k])[:, 0] for k in range(x.shape[1] - 1)], axis=1)
+    B, K = x.shape[0], x.shape[1] - 1
+    predicted = model.f(x[:, :-1].reshape(B * K, 1, 5), u[:, :-1].reshape(B * K, 4)).reshape(B, K, 5)
     return np.nanmean((x[:, 1:] - predicted) ** 2, axis=(0, 1))

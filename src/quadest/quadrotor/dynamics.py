@@ -55,6 +55,23 @@ def body_angular_accel(
     return out
 
 
+def body_rate_jacobian(params: QuadrotorParams, omega: np.ndarray, omega_r: np.ndarray) -> np.ndarray:
+    """``∂ω̇/∂ω`` (..., 3, 3) of :func:`body_angular_accel` at the body rates ``omega`` (..., 3),
+    with the rotor speed sum ``omega_r`` broadcastable to ``omega[..., 0]`` (the torques do not
+    depend on ω)."""
+    ix, iy, iz = params.inertia
+    kr = params.kr
+    jw = params.rotor_inertia * omega_r
+    p, q, r = omega[..., 0], omega[..., 1], omega[..., 2]
+    zero = np.zeros_like(p)
+    rows = [
+        [zero - kr[0] / ix, ((iy - iz) * r - jw) / ix, (iy - iz) * q / ix],
+        [((iz - ix) * r + jw) / iy, zero - kr[1] / iy, (iz - ix) * p / iy],
+        [(ix - iy) * q / iz, (ix - iy) * p / iz, zero - kr[2] / iz],
+    ]
+    return np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in rows], axis=-2)
+
+
 def _trig(angles: np.ndarray) -> tuple[np.ndarray, ...]:
     return (
         np.sin(angles[..., 0]),
