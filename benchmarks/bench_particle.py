@@ -3,7 +3,8 @@
 Run: ``python benchmarks/bench_particle.py`` (add ``--json`` for a machine-readable last line).
 
 Everything is measured in the same run, on the same data (``experiment=ungm_toolbox``: Q = R = 1,
-100 runs; 1000 particles per run, initial cloud N(0.1, 1), stratified resampling every step):
+100 runs; 1000 particles per run, initial cloud N(0.1, 1), stratified resampling every step). The
+filters' kernels are loaded (or compiled) before any timing:
 
 1. ns per particle per step of quadest's ``pf`` for the whole batch of 100 runs × 1000 particles;
 2. the same for a per-run loop: numpy propagation and weighting per run and
@@ -12,7 +13,11 @@ Everything is measured in the same run, on the same data (``experiment=ungm_tool
 3. the wall time of the runner on the full experiment (100 runs × 1000 particles × 500 steps),
    the issue's "under 60 s" target.
 
-4. the ``particles`` library's bootstrap filter (Chopin; ``particles_ungm.py``) on the same
+4. the same ``pf`` on the numpy references (``QUADEST_KERNELS=numpy``), each compiled particle
+   kernel against its numpy reference (µs per call for the batch, and compiled ÷ numpy), and the
+   first-call compile time of the particle kernels and their cached load time (fresh processes
+   with an empty numba cache directory of their own);
+5. the ``particles`` library's bootstrap filter (Chopin; ``particles_ungm.py``) on the same
    measurements, per run, stratified resampling every step. ``particles`` 0.4 pins numpy < 2 and
    must never enter quadest's dependencies, so it runs in a separate environment whose Python is
    given by ``--particles-python`` (or ``QUADEST_PARTICLES_PYTHON``)::
@@ -29,8 +34,10 @@ import argparse
 import json
 import os
 import subprocess
+import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -40,8 +47,12 @@ from hydra.core.global_hydra import GlobalHydra
 
 from quadest.config.paths import config_dir
 from quadest.config.schema import register_schemas
-from quadest.estimators.particle import BootstrapPF
+from quadest.estimators.particle import BootstrapPF, gather_particles
+from quadest.models.base import _gaussian_logpdf
 from quadest.models.validation import build_ungm_data
+from quadest.numerics import particle_kernels, square_root
+from quadest.numerics.draws import standard_normals
+from quadest.numerics.resampling import RESAMPLING_SCHEMES, normalised_weights, resample_from_uniforms
 from quadest.runner import run_estimator
 
 PARTICLES = 1000
@@ -64,13 +75,119 @@ def batched_pf(data) -> BootstrapPF:
 
 
 def time_batched(data, steps: int) -> float:
-    """ns per particle per step of quadest's pf over the whole batch."""
+    """ns per particle per step of quadest's pf over the whole batch, after two untimed steps
+    (which load the compiled kernels)."""
     est = batched_pf(data)
+    for k in range(1, 3):
+        est.predict(data.inputs[:, k - 1])
+        est.update(data.measurements[:, k], data.inputs[:, k])
     start = time.perf_counter()
-    for k in range(1, steps + 1):
+    for k in range(3, steps + 3):
         est.predict(data.inputs[:, k - 1])
         est.update(data.measurements[:, k], data.inputs[:, k])
     return (time.perf_counter() - start) / (steps * data.x0.shape[0] * PARTICLES) * 1e9
+
+
+def on_backend(backend: str, fun: Callable[[], float]) -> float:
+    """``fun()`` with ``QUADEST_KERNELS=backend``."""
+    before = os.environ.get(square_root.KERNELS_ENV)
+    os.environ[square_root.KERNELS_ENV] = backend
+    try:
+        return fun()
+    finally:
+        os.environ.pop(square_root.KERNELS_ENV)
+        if before is not None:
+            os.environ[square_root.KERNELS_ENV] = before
+
+
+def best_us(fun: Callable[[], object], repeats: int = 20, blocks: int = 5) -> float:
+    """Best mean wall time of ``fun()`` over ``blocks`` blocks of ``repeats`` calls, in µs."""
+    fun()
+    best = float("inf")
+    for _ in range(blocks):
+        start = time.perf_counter()
+        for _ in range(repeats):
+            fun()
+        best = min(best, (time.perf_counter() - start) / repeats * 1e6)
+    return best
+
+
+def kernel_ratios(B: int = 100, N: int = PARTICLES) -> dict[str, dict[str, float]]:
+    """Each compiled particle kernel against its numpy reference on the benchmark's sizes: µs per
+    call for the batch on each backend and compiled ÷ numpy (the resampling from given uniforms)."""
+    rng = np.random.default_rng(0)
+    w = rng.random((B, N)) ** 4
+    w /= w.sum(axis=1, keepdims=True)
+    uniforms, idx = rng.random((B, N)), rng.integers(0, N, (B, N))
+    log_w, incr = np.log(w), -0.5 * rng.standard_normal((B, N)) ** 2
+    x, runs = rng.standard_normal((B, N, 1)), np.arange(B)
+    R = np.eye(1)
+    model = ungm_data(2).model
+    u = np.arange(B, dtype=float)[:, None]
+    codes = {"multinomial": 0, "systematic": 1, "stratified": 2, "residual": 3}
+    out = np.empty((B, N), dtype=np.intp)
+    pairs: dict[str, tuple[Callable[[], object], Callable[[], object]]] = {
+        "standard_normals": (
+            lambda: standard_normals(rngs, (N, 1)),
+            lambda: [rng_b.standard_normal((N, 1)) for rng_b in rngs],
+        ),
+        "normalised_weights": (lambda: normalised_weights(log_w, incr), lambda: normalised_weights(log_w, incr)),
+        "gaussian_logpdf": (lambda: _gaussian_logpdf(x, R, np.ones(1)), lambda: _gaussian_logpdf(x, R, np.ones(1))),
+        "gather": (
+            lambda: particle_kernels.gather_kernel(x, runs, idx, np.empty_like(x)),
+            lambda: gather_particles(x, idx),
+        ),
+        "ungm_f": (lambda: model.f(x, u), lambda: model.f_numpy(x, u)),
+        "ungm_h": (lambda: model.h(x, u), lambda: model.h_numpy(x, u)),
+    }
+    for scheme in RESAMPLING_SCHEMES:
+        pairs[f"resample_{scheme}"] = (
+            lambda s=scheme: particle_kernels.resample_kernel(codes[s], w, uniforms, out),
+            lambda s=scheme: resample_from_uniforms(s, w, uniforms),
+        )
+    rngs = [np.random.default_rng(s) for s in range(B)]
+    result = {}
+    for name, (compiled, reference) in pairs.items():
+        numba_us = on_backend("numba", lambda f=compiled: best_us(f))
+        numpy_us = on_backend("numpy", lambda f=reference: best_us(f))
+        result[name] = {
+            "numba_us": round(numba_us, 1),
+            "numpy_us": round(numpy_us, 1),
+            "compiled_over_numpy": round(numba_us / numpy_us, 3),
+        }
+    return result
+
+
+COMPILE_SCRIPT = """
+import json, time
+import numpy as np
+start = time.perf_counter()
+from quadest.estimators.particle import BootstrapPF
+from quadest.models.validation import UNGMModel
+imported = time.perf_counter()
+model = UNGMModel(1.0, 1.0, 1.0, 2)
+for scheme in ("multinomial", "systematic", "stratified", "residual"):
+    est = BootstrapPF(model, particles=16, resampling=scheme)
+    est.set_generators([np.random.default_rng(s) for s in range(2)])
+    est.initialize(np.zeros((2, 1)), np.ones((2, 1, 1)))
+    est.predict(np.zeros((2, 1)))
+    est.update(np.zeros((2, 1)), np.ones((2, 1)))
+print(json.dumps({"import_s": imported - start, "first_calls_s": time.perf_counter() - imported}))
+"""
+
+
+def compile_times() -> dict[str, float]:
+    """The first steps of ``pf`` with each resampling scheme in a fresh process with an empty numba
+    cache (the particle kernels and the UNGM f/h compile), then in a second fresh process with that
+    cache (they load)."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, square_root.KERNELS_ENV: "numba"}
+        runs = [
+            json.loads(subprocess.run([sys.executable, "-c", COMPILE_SCRIPT], env=env, capture_output=True,
+                                      text=True, check=True).stdout)
+            for _ in range(2)
+        ]  # fmt: skip
+    return {"compile_s": round(runs[0]["first_calls_s"], 2), "cached_load_s": round(runs[1]["first_calls_s"], 2)}
 
 
 def time_filterpy_loop(data, steps: int) -> float:
@@ -126,13 +243,25 @@ def main() -> None:
     args = parser.parse_args()
     load_before = os.getloadavg()[0]
     data = ungm_data(100)
-    batched = time_batched(data, args.steps)
+    batched = on_backend("numba", lambda: time_batched(data, args.steps))
+    batched_numpy = on_backend("numpy", lambda: time_batched(data, args.steps))
     loop = time_filterpy_loop(data, args.loop_steps)
     full = time_full_experiment(data)
+    ratios = kernel_ratios()
+    compile_s = compile_times()
     library = time_particles_library(args.particles_python, data, args.steps) if args.particles_python else None
-    print(f"pf, 100 runs x {PARTICLES} particles: {batched:.1f} ns per particle per step")
+    print(f"pf, 100 runs x {PARTICLES} particles: {batched:.1f} ns per particle per step (compiled kernels)")
+    print(f"pf on the numpy references (QUADEST_KERNELS=numpy): {batched_numpy:.1f} ns per particle per step")
     print(f"per-run loop with filterpy.stratified_resample: {loop:.1f} ns per particle per step")
-    print(f"speed-up: {loop / batched:.1f}x")
+    print(f"speed-up: {loop / batched:.1f}x (goal 20x; numpy references: {loop / batched_numpy:.1f}x)")
+    print("compiled particle kernels against their numpy references (100 runs x 1000 particles, µs per call):")
+    for name, r in ratios.items():
+        ratio = r["compiled_over_numpy"]
+        print(f"  {name:22s} {r['numba_us']:8.1f} vs {r['numpy_us']:8.1f}  compiled / numpy = {ratio:.3f}")
+    print(
+        f"first steps of pf with every scheme: {compile_s['compile_s']:.2f} s compiling the kernels "
+        f"(empty cache), {compile_s['cached_load_s']:.2f} s loading them from the cache"
+    )
     print(f"runner, ungm_toolbox with pf (100 runs x {PARTICLES} particles x 500 steps): {full:.1f} s")
     load = (load_before, os.getloadavg()[0])
     print(f"1-minute load average before / after: {load[0]:.1f} / {load[1]:.1f} on {os.cpu_count()} cores")
@@ -155,6 +284,10 @@ def main() -> None:
             "ungm_toolbox_pf_s": round(full, 1),
             "load_average": [round(v, 2) for v in load],
             "particles_library_ns_per_particle_step": library and round(library["ns_per_particle_step"], 2),
+            "pf_numpy_ns_per_particle_step": round(batched_numpy, 2),
+            "speedup_numpy_kernels": round(loop / batched_numpy, 1),
+            "kernel_ratios": ratios,
+            **compile_s,
         }
         print(json.dumps(summary))
 

@@ -57,8 +57,8 @@ def test_roughening_jitter_has_the_standard_deviation_of_gordon_salmond_and_smit
     resampled = {}
     redraw = est.redraw
 
-    def recording_redraw(w, runs, rngs):
-        redraw(w, runs, rngs)
+    def recording_redraw(w, runs):
+        redraw(w, runs)
         resampled["x"] = est.x[runs].copy()  # the resampled cloud, before any roughening
 
     est.redraw = recording_redraw

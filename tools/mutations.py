@@ -57,6 +57,7 @@ CACHE_KEYS = "tests/test_cache_keys_property.py::"
 REPLAY_TIMING = "tests/test_replay_timing.py::"
 BANDS = "tests/test_consistency_bands.py::"
 ROUGHENING = "tests/test_roughening.py::"
+PARTICLE_KERNELS = "tests/test_particle_kernels.py::"
 
 MUTATIONS = (
     Mutation(
@@ -319,6 +320,62 @@ MUTATIONS = (
         "self.N ** (-1.0 / (n + 4))",
         (ROUGHENING + "test_roughening_jitter_has_the_standard_deviation_of_gordon_salmond_and_smith[pf]",
          ROUGHENING + "test_roughening_jitter_has_the_standard_deviation_of_gordon_salmond_and_smith[upf]"),
+    ),
+    Mutation(
+        "strata selection counts a position equal to a cumulative weight as below it",
+        "src/quadest/numerics/particle_kernels.py",
+        "counts[m - 1 + (padded[m] < c[j]) + (padded[m + 1] < c[j])] += 1",
+        "counts[m - 1 + (padded[m] <= c[j]) + (padded[m + 1] <= c[j])] += 1",
+        (PARTICLE_KERNELS + "test_resampling_backends_agree_on_many_uniforms_near_the_cumulative_weights[stratified]",),
+    ),
+    Mutation(
+        "pairwise summation with blocks of 64 instead of numpy's 128",
+        "src/quadest/numerics/particle_kernels.py",
+        "        elif n <= 128:\n",
+        "        elif n <= 64:\n",
+        (PARTICLE_KERNELS + "test_normalised_weights_and_ess_equal_the_reference_bit_for_bit[1000-30.0]",),
+    ),
+    Mutation(
+        "pairwise accumulators combined in another order",
+        "src/quadest/numerics/particle_kernels.py",
+        "total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))",
+        "total = ((r0 + r2) + (r1 + r3)) + ((r4 + r6) + (r5 + r7))",
+        (PARTICLE_KERNELS + "test_normalised_weights_and_ess_equal_the_reference_bit_for_bit[20000-0.3]",),
+    ),
+    Mutation(
+        "compiled gather reads particles it has already overwritten",
+        "src/quadest/numerics/particle_kernels.py",
+        "            old[:, :] = source\n            source = old\n",
+        "            old[:, :] = source\n",
+        (PARTICLE_KERNELS + "test_gather_kernel_picks_the_same_particles_in_place[trailing0]",),
+    ),
+    Mutation(
+        "compiled draws keyed by the row instead of the run",
+        "src/quadest/numerics/particle_kernels.py",
+        "        rng = rngs[runs[r]]\n        for k in range(out.shape[1]):",
+        "        rng = rngs[r]\n        for k in range(out.shape[1]):",
+        (PARTICLE_KERNELS + "test_standard_normals_draw_what_each_generator_draws_alone[shape0]",),
+    ),
+    Mutation(
+        "compiled residual resampling reads the uniforms from the start",
+        "src/quadest/numerics/particle_kernels.py",
+        "out[k] = _search(c, u[k - kept])",
+        "out[k] = _search(c, u[k])",
+        (PARTICLE_KERNELS + "test_resampling_kernel_gives_the_reference_indices[1000-residual]",),
+    ),
+    Mutation(
+        "compiled log-density without its normalising constant",
+        "src/quadest/numerics/particle_kernels.py",
+        "out[k] = -0.5 * (maha + constant) - log_det",
+        "out[k] = -0.5 * maha - log_det",
+        (PARTICLE_KERNELS + "test_diagonal_gaussian_log_density_kernel_equals_numpy[1]",),
+    ),
+    Mutation(
+        "compiled UNGM transition with the first run's time index for every run",
+        "src/quadest/models/validation_kernels.py",
+        "out[b, k, 0] = 0.5 * v + 25.0 * v / (1.0 + v * v) + c[b]",
+        "out[b, k, 0] = 0.5 * v + 25.0 * v / (1.0 + v * v) + c[0]",
+        (PARTICLE_KERNELS + "test_ungm_compiled_f_and_h_equal_the_numpy_reference",),
     ),
 )  # fmt: skip
 

@@ -3,9 +3,11 @@
 Every run of a batch carries its own cloud: particles ``x`` (B, N, n) beside normalised
 log-weights (B, N), plus any per-particle arrays a proposal needs (the EKF proposal's P_i,
 (B, N, n, n)) in :attr:`ParticleFilter.particle_state`, which resampling carries along. Every
-operation works on all particles of all runs at once; the only Python loops run over the runs,
-to draw from each run's own generator (capability ``"random"``), so a run in a batch gets exactly
-the numbers it gets alone (and over blocks of runs in :func:`~quadest.numerics.resampling.resample_from_uniforms`).
+operation works on all particles of all runs at once, and every run draws from its own generator
+(capability ``"random"``), so a run in a batch gets exactly the numbers it gets alone. On the
+numba backend (``QUADEST_KERNELS``, docs/benchmarks.md) the draws, the Gaussian log-densities, the
+normalisation with the ESS, the resampling and the gather of the particles are compiled kernels
+(:mod:`quadest.numerics.particle_kernels`) that give their numpy references' numbers bit for bit.
 
 One step (sequential importance sampling with resampling; Gordon, Salmond & Smith 1993; Doucet,
 Godsill & Andrieu 2000, "On sequential Monte Carlo sampling methods for Bayesian filtering"):
@@ -59,11 +61,11 @@ from quadest.estimators.base import Estimator
 from quadest.estimators.params import parameter_problem, ranged
 from quadest.models.base import FilterModel
 from quadest.numerics import psd_sqrt
+from quadest.numerics.draws import particle_kernels, standard_normals
 from quadest.numerics.resampling import (
     RESAMPLING_SCHEMES,
     check_scheme,
-    effective_sample_size,
-    normalise_log_weights,
+    normalised_weights,
     resample,
 )
 
@@ -236,7 +238,7 @@ class ParticleFilter(Estimator):
         """New particles (B, N, n) from ``self.x`` and the log proposal density at them (B, N);
         ``None`` when the proposal is the transition prior (bootstrap: the transition density
         cancels). A proposal may also replace entries of :attr:`particle_state`."""
-        w = self._per_run(lambda rng: self.model.sample_process_noise(rng, (self.N,)))
+        w = self.model.sample_process_noise_runs(self.rngs, (self.N,))
         return self.model.f_noise(self.x, w, u_prev), None
 
     # --- the filter ---
@@ -257,7 +259,7 @@ class ParticleFilter(Estimator):
         self._reset_failures(B)
         if self.initial_cloud == "sample":
             L0 = np.stack([psd_sqrt(P, "P0") for P in P0])  # P0 may be singular (a state known exactly)
-            eps = self._per_run(lambda rng: rng.standard_normal((self.N, n)))
+            eps = standard_normals(self.rngs, (self.N, n))
             self.x = x0[:, None, :] + eps @ np.swapaxes(L0, -1, -2)
         elif self.initial_cloud == "uniform":
             low, high = self.initial_range
@@ -275,7 +277,8 @@ class ParticleFilter(Estimator):
         self.vanished_steps = np.zeros(B, dtype=int)
         self.step = 0
         self._mean, self._cov = weighted_moments(self.x, np.exp(self.logw))
-        self._safe = {"x": self.x.copy()}
+        self.particle_state = self.initial_particle_state(x0, P0)
+        self._safe = {"x": self.x.copy(), **{key: arr.copy() for key, arr in self.particle_state.items()}}
 
     def diagnostics(self) -> dict[str, np.ndarray]:
         """Per run: mean ESS over the steps, resampling count, proposals outside the
@@ -290,10 +293,10 @@ class ParticleFilter(Estimator):
             "floored_steps": self.floored_steps, "vanished_steps": self.vanished_steps,
         }  # fmt: skip
 
-    def _save_safe_state(self) -> None:
-        """Remember the initial per-particle arrays, to park failed runs on (call after filling
-        :attr:`particle_state` in ``initialize``)."""
-        self._safe.update({k: v.copy() for k, v in self.particle_state.items()})
+    def initial_particle_state(self, x0: np.ndarray, P0: np.ndarray) -> dict[str, np.ndarray]:
+        """The per-particle arrays (B, N, ...) a proposal carries besides the particles, at the start
+        (failed runs are parked on them); none by default."""
+        return {}
 
     def predict(self, u: np.ndarray) -> None:
         """Record the input of the previous sample; the step itself runs in :meth:`update`."""
@@ -315,11 +318,10 @@ class ParticleFilter(Estimator):
                 incr = incr + log_trans - log_q
         self.log_increment = incr
         self.x = x_new
-        w, vanished = normalise_log_weights(self.logw + incr)  # vanished rows: equal weights
+        w, vanished, self.ess = normalised_weights(self.logw, incr)  # vanished rows: equal weights
         self.vanished_steps += vanished
         if vanished.any() and self.vanished_weights == "flag":
             self.flag(np.flatnonzero(vanished), f"all particle weights vanished at step {self.step}")
-        self.ess = effective_sample_size(w)
         self.ess_sum += self.ess
         if self.estimate == "weighted":
             self._mean, self._cov = weighted_moments(self.x, w)
@@ -341,21 +343,28 @@ class ParticleFilter(Estimator):
     def resample_runs(self, w: np.ndarray, runs: np.ndarray) -> None:
         """Replace the clouds of ``runs`` by equally weighted ones drawn from weights ``w`` (B, N),
         then roughen them."""
-        rngs = [self.rngs[i] for i in runs]
-        self.redraw(w[runs], runs, rngs)
+        self.redraw(w[runs], runs)
         if self.roughening > 0:
-            self._roughen(runs, rngs)
+            self._roughen(runs)
 
-    def redraw(self, w: np.ndarray, runs: np.ndarray, rngs: list[np.random.Generator]) -> None:
-        """The resampling proper: new clouds for ``runs`` from their weights ``w`` (R, N), carrying
-        :attr:`particle_state` (a filter with another resampling overrides this)."""
-        idx = resample(self.resampling, w, rngs)
+    def redraw(self, w: np.ndarray, runs: np.ndarray) -> None:
+        """The resampling proper: new clouds for ``runs`` from their weights ``w`` (R, N), run
+        ``runs[r]`` drawing from ``self.rngs[runs[r]]``, carrying :attr:`particle_state` (a filter
+        with another resampling overrides this)."""
+        idx = resample(self.resampling, w, self.rngs, runs)
         self.x = self._pick(self.x, runs, idx)
         self.carry(runs, idx)
 
     def _pick(self, arrays: np.ndarray, runs: np.ndarray, idx: np.ndarray) -> np.ndarray:
         """``arrays`` (B, N, ...) with the particles of ``runs`` picked by ancestor indices ``idx``
-        (R, N) (a new array when every run resamples, else updated in place)."""
+        (R, N) (a new array when every run resamples, else updated in place), by the compiled
+        gather for C-contiguous float arrays on the numba backend, else by :func:`gather_particles`."""
+        kernels = particle_kernels()
+        if kernels is not None and arrays.dtype == np.float64 and arrays.flags.c_contiguous:
+            flat = arrays.reshape(*arrays.shape[:2], -1)
+            out = np.empty_like(flat) if runs.size == arrays.shape[0] else flat
+            kernels.gather_kernel(flat, runs, idx, out)
+            return out.reshape(arrays.shape)
         if runs.size == arrays.shape[0]:
             return gather_particles(arrays, idx)
         arrays[runs] = gather_particles(arrays[runs], idx)
@@ -366,11 +375,11 @@ class ParticleFilter(Estimator):
         for key, arr in self.particle_state.items():
             self.particle_state[key] = self._pick(arr, runs, idx)
 
-    def _roughen(self, runs: np.ndarray, rngs: list[np.random.Generator]) -> None:
+    def _roughen(self, runs: np.ndarray) -> None:
         x = self.x[runs]
         n = x.shape[-1]
         sigma = self.roughening * (x.max(axis=1) - x.min(axis=1)) * self.N ** (-1.0 / n)  # (R, n)
-        eps = np.stack([rng.standard_normal((self.N, n)) for rng in rngs])
+        eps = standard_normals(self.rngs, (self.N, n), runs)
         self.x[runs] = x + eps * sigma[:, None, :]
 
     def _park_failed(self) -> None:

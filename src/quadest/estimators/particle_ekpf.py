@@ -28,6 +28,7 @@ from quadest.errors import ConfigError
 from quadest.estimators.particle import ParticleFilter, ParticleParams
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky
+from quadest.numerics.draws import standard_normals
 
 
 @dataclass
@@ -76,11 +77,9 @@ class EKPF(ParticleFilter):
         self.Q_proposal = _noise_covariance("proposal_Q", proposal_Q, model.Q)
         self.R_proposal = _noise_covariance("proposal_R", proposal_R, model.R)
 
-    def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
+    def initial_particle_state(self, x0: np.ndarray, P0: np.ndarray) -> dict[str, np.ndarray]:
         """Every particle starts with covariance ``P0`` of its run."""
-        super().initialize(x0, P0)
-        self.particle_state["P"] = np.repeat(np.asarray(P0, dtype=float)[:, None], self.N, axis=1)
-        self._save_safe_state()
+        return {"P": np.repeat(np.asarray(P0, dtype=float)[:, None], self.N, axis=1)}
 
     def propose(self, u_prev: np.ndarray, z: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``x_i ~ N(μ_i, P̂_i)`` from :meth:`proposal_moments`; returns ``log N(x_i; μ_i, P̂_i)``
@@ -92,7 +91,7 @@ class EKPF(ParticleFilter):
         if bad_runs.size:
             self.flag(bad_runs, f"proposal covariance not positive definite at step {self.step}")
         L = L.reshape(B, N, n, n)
-        eps = self._per_run(lambda rng: rng.standard_normal((N, n)))
+        eps = standard_normals(self.rngs, (N, n))
         x_new = mu + (L @ eps[..., None])[..., 0]
         log_det = np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
         log_q = -0.5 * np.sum(eps**2, axis=-1) - log_det - 0.5 * n * np.log(2.0 * np.pi)

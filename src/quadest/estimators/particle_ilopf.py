@@ -100,14 +100,17 @@ class ILOPF(EKPF):
         )
         return self.coefficient_scale * np.stack([draw(rng) for rng in rngs])
 
-    def redraw(self, w: np.ndarray, runs: np.ndarray, rngs: list[np.random.Generator]) -> None:
+    def redraw(self, w: np.ndarray, runs: np.ndarray) -> None:
         """Seed 001 §2.2: copy and discard groups, one roulette draw from each, eq. (8)."""
         copy = w >= self.threshold / self.N
         copy |= ~copy.any(axis=1, keepdims=True) & (w > 0)  # threshold > 1 can empty it: resample plainly
         discard = (w > 0) & ~copy
-        a = resample(self.resampling, np.where(copy, w, 0.0), rngs)
+        a = resample(self.resampling, np.where(copy, w, 0.0), self.rngs, runs)
         has_discard = discard.any(axis=1)
-        s = resample("multinomial", np.where(discard, w, 0.0) + np.where(has_discard[:, None], 0.0, copy), rngs)
+        s = resample(
+            "multinomial", np.where(discard, w, 0.0) + np.where(has_discard[:, None], 0.0, copy), self.rngs, runs
+        )
+        rngs = [self.rngs[i] for i in runs]
         rho = np.where(has_discard[:, None], self._coefficients(rngs, np.take_along_axis(w, a, axis=1)), 0.0)
         x = self.x[runs]
         x_a, x_s = gather_particles(x, a), gather_particles(x, s)

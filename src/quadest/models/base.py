@@ -37,12 +37,13 @@ from __future__ import annotations
 
 import copy
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
 
+from quadest.numerics.draws import all_runs, particle_kernels, standard_normals
 from quadest.numerics.square_root import psd_sqrt
 
 
@@ -301,6 +302,26 @@ class FilterModel(ABC):
         """Draws of the process noise, shape ``(*size, q)``; N(0, Q) unless overridden."""
         return self._gaussian_draws(rng, size, self.Q)
 
+    def sample_process_noise_runs(
+        self, rngs: Sequence[np.random.Generator], size: tuple[int, ...], runs: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Process-noise draws of many runs at once, ``(R, *size, q)``: row ``r`` is
+        ``sample_process_noise(rngs[runs[r]], size)`` exactly (``runs``: all when ``None``). The
+        Gaussian default draws the whole batch's normals in one call
+        (:func:`~quadest.numerics.draws.standard_normals`); a model that overrides
+        :meth:`sample_process_noise` is called once per run."""
+        if type(self).sample_process_noise is not FilterModel.sample_process_noise:
+            return np.stack([self.sample_process_noise(rngs[b], size) for b in all_runs(rngs, runs)])
+        e = standard_normals(rngs, (*size, self.Q.shape[0]), runs)
+        scale = self._diagonal_scale(self.Q)
+        if scale is not None:
+            e *= scale
+            return e
+        factor = self._noise_factor(self.Q).T
+        for row in e:
+            row[...] = row @ factor  # one product per run, as the per-run draw computes it
+        return e
+
     def process_noise_logpdf(self, w: np.ndarray) -> np.ndarray:
         """Log-density of process-noise values ``w`` (..., q) → (...); N(0, Q) unless overridden."""
         return _gaussian_logpdf(w, self.Q, self._diagonal_scale(self.Q))
@@ -361,8 +382,16 @@ def _gaussian_logpdf(e: np.ndarray, C: np.ndarray, scale: np.ndarray | None = No
     particle filter's weighting. The values equal the general path's for up to 4 dimensions and
     agree to about one ulp above (the squares are summed in another order)."""
     if scale is not None:
-        maha = np.sum((e * (1.0 / scale)) ** 2, axis=-1)
         log_det = np.sum(np.log(scale))
+        kernels = particle_kernels()
+        if kernels is not None and e.dtype == np.float64:
+            out = np.empty(e.shape[:-1])
+            flat = np.ascontiguousarray(e).reshape(-1, e.shape[-1])
+            kernels.gaussian_logpdf_diagonal_kernel(
+                flat, 1.0 / scale, C.shape[0] * np.log(2.0 * np.pi), log_det, out.reshape(-1)
+            )
+            return out
+        maha = np.sum((e * (1.0 / scale)) ** 2, axis=-1)
     else:
         L = np.linalg.cholesky(C)
         white = np.linalg.solve(L, np.moveaxis(e, -1, 0).reshape(C.shape[0], -1))

@@ -14,6 +14,9 @@ true floor on both.
 
 from __future__ import annotations
 
+from functools import cache
+from types import ModuleType
+
 import numpy as np
 
 from quadest.models.base import FilterModel
@@ -22,6 +25,17 @@ from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.data import sample_count
 from quadest.montecarlo.initial import draw_initial_estimates, initial_covariance
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.numerics.square_root import kernel_backend
+
+
+@cache
+def _kernels() -> ModuleType | None:
+    """The compiled UNGM ``f``/``h``, or ``None`` when numba cannot be imported."""
+    try:
+        from quadest.models import validation_kernels
+    except ImportError:
+        return None
+    return validation_kernels
 
 
 def constant_velocity_model(cfg, runs: int) -> LinearGaussianModel:
@@ -62,10 +76,38 @@ class UNGMModel(FilterModel):
         self.Q, self.R = np.array([[Q]]), np.array([[R]])
         self.dt, self.batch_size = dt, batch_size
 
+    def _compiled(self, x: np.ndarray) -> ModuleType | None:
+        """The compiled ``f``/``h`` (:mod:`quadest.models.validation_kernels`) for real points
+        (B, K, 1) on the ``numba`` backend; ``None`` sends the call to numpy (complex steps for
+        derivatives, ``QUADEST_KERNELS=numpy``)."""
+        if x.dtype != np.float64 or x.ndim != 3 or kernel_backend() != "numba":
+            return None
+        return _kernels()
+
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The UNGM transition: compiled for real points, else :meth:`f_numpy`."""
+        kernels = self._compiled(x)
+        if kernels is None or u.dtype != np.float64:
+            return self.f_numpy(x, u)
+        out = np.empty(x.shape)
+        kernels.ungm_f(np.ascontiguousarray(x), np.ascontiguousarray(8.0 * np.cos(1.2 * u[:, 0])), out)
+        return out
+
+    def f_numpy(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The numpy reference of :meth:`f`."""
         return 0.5 * x + 25.0 * x / (1.0 + x * x) + 8.0 * np.cos(1.2 * u[:, None, :1])
 
     def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The UNGM measurement ``x²/20``: compiled for real points, else :meth:`h_numpy`."""
+        kernels = self._compiled(x)
+        if kernels is None:
+            return self.h_numpy(x, u)
+        out = np.empty(x.shape)
+        kernels.ungm_h(np.ascontiguousarray(x), out)
+        return out
+
+    def h_numpy(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The numpy reference of :meth:`h`."""
         return x * x / 20.0
 
     def F_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -14,7 +14,9 @@ filtering"; Hol, Schön & Gustafsson 2006):
 Every scheme is unbiased: the expected number of copies of particle i is ``N wᵢ``.
 
 Two forms: :func:`resample` draws from one ``np.random.Generator`` per run (so a run resampled in
-a batch gets exactly the indices it gets alone), :func:`resample_from_uniforms` takes the
+a batch gets exactly the indices it gets alone; on the numba backend its selection is the compiled
+:func:`quadest.numerics.particle_kernels.resample_kernel`, which gives the same indices),
+:func:`resample_from_uniforms`, the numpy reference, takes the
 uniforms (B, N) explicitly (``systematic`` reads column 0 only; ``residual`` reads the first
 ``N − Σ⌊N wᵢ⌋`` columns of each row). The selection rule is ``index = #{j : c_j ≤ u}`` with ``c``
 the cumulative weights (divided by their total, so the last is exactly 1), the rule of ``filterpy.monte_carlo``, so
@@ -31,6 +33,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from quadest.errors import ConfigError
+from quadest.numerics.draws import all_runs, particle_kernels
 
 RESAMPLING_SCHEMES = ("multinomial", "systematic", "stratified", "residual")
 BLOCK_PARTICLES = 1 << 14  # particles resampled at once (128 KiB per float64 temporary)
@@ -45,6 +48,23 @@ def check_scheme(scheme: str, key: str = "resampling") -> None:
 def effective_sample_size(weights: np.ndarray) -> np.ndarray:
     """Kish's effective sample size ``1 / Σ wᵢ²`` of normalised weights (..., N) → (...)."""
     return 1.0 / np.sum(weights**2, axis=-1)
+
+
+def normalised_weights(log_weights: np.ndarray, increments: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normalised weights (B, N) of ``log_weights + increments``, the vanished runs (B,) and the
+    ESS (B,): :func:`normalise_log_weights` and :func:`effective_sample_size`, the references, or
+    on the numba backend the same numbers bit for bit in three passes (two compiled kernels of
+    :mod:`quadest.numerics.particle_kernels` around numpy's ``exp``)."""
+    kernels = particle_kernels()
+    if kernels is None:
+        w, vanished = normalise_log_weights(log_weights + increments)
+        return w, vanished, effective_sample_size(w)
+    B, N = log_weights.shape
+    w, vanished, ess = np.empty((B, N)), np.empty(B, dtype=bool), np.empty(B)
+    kernels.shift_log_weights_kernel(np.ascontiguousarray(log_weights), np.ascontiguousarray(increments), w, vanished)
+    np.exp(w, out=w)
+    kernels.normalise_kernel(w, np.empty(N), ess)
+    return w, vanished, ess
 
 
 def normalise_log_weights(log_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -173,6 +193,23 @@ def draw_uniforms(scheme: str, rngs: Sequence[np.random.Generator], N: int) -> n
     return out
 
 
-def resample(scheme: str, weights: np.ndarray, rngs: Sequence[np.random.Generator]) -> np.ndarray:
-    """Ancestor indices (B, N) of normalised ``weights`` (B, N), run ``b`` drawing from ``rngs[b]``."""
-    return resample_from_uniforms(scheme, weights, draw_uniforms(scheme, rngs, np.shape(weights)[1]))
+def resample(
+    scheme: str, weights: np.ndarray, rngs: Sequence[np.random.Generator], runs: np.ndarray | None = None
+) -> np.ndarray:
+    """Ancestor indices (R, N) of normalised ``weights`` (R, N), row ``r`` drawing from
+    ``rngs[runs[r]]`` (``runs``: every run of ``rngs`` when ``None``).
+
+    The selection runs in one compiled pass per run on the numba backend
+    (:func:`quadest.numerics.particle_kernels.resample_kernel`), as :func:`resample_from_uniforms`,
+    the reference, on the numpy backend; both give the same indices from the same uniforms."""
+    check_scheme(scheme)
+    weights = np.asarray(weights, dtype=float)
+    uniforms = draw_uniforms(scheme, [rngs[b] for b in all_runs(rngs, runs)], weights.shape[1])
+    kernels = particle_kernels()
+    if kernels is None:
+        return resample_from_uniforms(scheme, weights, uniforms)
+    out = np.empty(weights.shape, dtype=np.intp)
+    code = {"multinomial": kernels.MULTINOMIAL, "systematic": kernels.SYSTEMATIC, "stratified": kernels.STRATIFIED,
+            "residual": kernels.RESIDUAL}[scheme]  # fmt: skip
+    kernels.resample_kernel(code, np.ascontiguousarray(weights), uniforms, out)
+    return out
