@@ -266,6 +266,115 @@ def test_each_kernel_gives_a_batch_what_it_gives_each_run_alone():
             np.testing.assert_array_equal(b[i], a[0])
 
 
+# --- the SR-UKF's fused steps (quadest.numerics.unscented, eqs 5.15–5.29) ---
+#
+# The kernels sum the means and Pxy in another order than numpy's matmul, factorise with the
+# Householder LQ instead of LAPACK and apply the same rank-one rotations: every difference is
+# round-off, propagated through the factorisations. The tolerance is measured on each problem, not
+# guessed: ten times how far the reference itself moves, at most over three draws, when its inputs
+# are rounded differently (each entry multiplied by 1 + 2 eps ξ, ξ ~ N(0, 1)), plus 64 eps of the
+# result's magnitude for
+# the runs whose reference barely moves (the test_srukf_identities.py yardstick, per run). A wrong
+# weight, a swapped index or a dropped term all give differences of the order of the result.
+
+
+def unscented_problem(rng: np.random.Generator, B: int, n: int, m: int, alpha: float, decades: float):
+    """Points ``X`` about ``x`` with factor ``S`` (condition ≈ 10**decades), their images ``Y``
+    under a smooth map to m outputs, the noise factor (m, m) and a measurement ``z``."""
+    from quadest.numerics.unscented import unscented_points_numpy
+
+    rule = UnscentedRule(alpha, 2.0, 0.0)
+    S = lower_factors(rng, B, n, decades)
+    x = rng.standard_normal((B, n))
+    X = unscented_points_numpy(x, S, rule.ut(n).gamma)
+    M = rng.standard_normal((n, m))
+    Y = X @ M + 0.1 * np.sin(X @ M) ** 2
+    sqrt_noise = np.linalg.cholesky(random_spd(rng, m, 0.1))
+    return rule.ut(n), x, S, X, Y, sqrt_noise, rng.standard_normal((B, m))
+
+
+def rounded(rng: np.random.Generator, a: np.ndarray) -> np.ndarray:
+    return a * (1.0 + 2.0 * EPS * rng.standard_normal(a.shape))
+
+
+def measured_tolerance(reference, args: tuple, perturb: tuple[int, ...], outputs: tuple[int, ...]) -> list:
+    """Per output (and per run): 10 × the reference's move under rounded inputs + 64 eps |output|."""
+    rng = np.random.default_rng(99)
+    base = reference(*args)
+    moves = [reference(*(rounded(rng, a) if i in perturb else a for i, a in enumerate(args))) for _ in range(3)]
+    return [10.0 * np.max([per_run_error(moved[k], base[k]) for moved in moves], axis=0)
+            + 64 * EPS * np.abs(base[k]).reshape(len(base[k]), -1).max(1) for k in outputs]  # fmt: skip
+
+
+def test_unscented_points_kernel_is_the_reference_bit_for_bit():
+    from quadest.numerics.unscented import unscented_points, unscented_points_numpy
+
+    ut, x, S, _, _, _, _ = unscented_problem(np.random.default_rng(20), 9, 6, 6, 0.5, 4.0)
+    np.testing.assert_array_equal(unscented_points(x, S, ut.gamma), unscented_points_numpy(x, S, ut.gamma))
+
+
+@pytest.mark.parametrize("alpha", [1e-3, 0.5, 1.0])
+@pytest.mark.parametrize(("n", "m"), [(6, 6), (6, 3), (4, 1), (9, 2)])
+@pytest.mark.parametrize("decades", [0.0, 4.0])
+def test_unscented_moments_kernel_agrees_with_numpy(alpha, n, m, decades):
+    """Mean and factor of transformed points with additive noise (eqs 5.17–5.19, 5.22–5.24),
+    partially observed (m < n) and at α = 1e-3, where W0(c) ≈ −1e6 makes the rank-one term a
+    downdate that fails in some runs: both must fail the same runs and keep the same factor."""
+    from quadest.numerics.unscented import unscented_moments, unscented_moments_numpy
+
+    ut, _, _, _, Y, sqrt_noise, _ = unscented_problem(np.random.default_rng(n + m), 12, n, m, alpha, decades)
+    mean, S, failed = unscented_moments(Y, ut, sqrt_noise)
+    ref_mean, ref_S, ref_failed = unscented_moments_numpy(Y, ut, sqrt_noise)
+    np.testing.assert_array_equal(failed, ref_failed)
+    tol_mean, tol_S = measured_tolerance(unscented_moments_numpy, (Y, ut, sqrt_noise), (0,), (0, 1))
+    assert (per_run_error(mean, ref_mean) <= tol_mean).all()
+    assert (per_run_error(S, ref_S) <= tol_S).all()
+    np.testing.assert_array_equal(np.triu(S, 1), 0.0)
+
+
+@pytest.mark.parametrize("alpha", [1e-3, 0.5])
+@pytest.mark.parametrize(("n", "m"), [(6, 6), (6, 3), (4, 1)])
+@pytest.mark.parametrize("decades", [0.0, 3.0])
+def test_unscented_correction_kernel_agrees_with_numpy(alpha, n, m, decades):
+    """``Pxy``, gain, corrected mean and posterior downdate (eqs 5.25–5.29); the prior factor of
+    two runs is shrunk so that their downdate by ``K Sy`` fails in both implementations."""
+    from quadest.numerics.unscented import unscented_correction, unscented_correction_numpy, unscented_moments_numpy
+
+    ut, x, S, X, Y, sqrt_noise, z = unscented_problem(np.random.default_rng(30 + n), 12, n, m, alpha, decades)
+    y_mean, Sy, _ = unscented_moments_numpy(Y, ut, sqrt_noise)
+    S = S.copy()
+    S[[3, 7]] *= 0.05
+    args = (X, x, Y, y_mean, ut.wc, Sy, S, z)
+    out, ref = unscented_correction(*args), unscented_correction_numpy(*args)
+    np.testing.assert_array_equal(out[3], ref[3])
+    assert ref[3][[3, 7]].all()
+    tols = measured_tolerance(unscented_correction_numpy, args, (0, 2, 5), (0, 1, 2))
+    for k, tol in zip((0, 1, 2), tols, strict=True):
+        assert (per_run_error(out[k], ref[k]) <= tol).all(), k
+
+
+def test_unscented_kernels_keep_a_nan_run_in_its_row_and_give_a_batch_each_run_alone():
+    from quadest.numerics.unscented import unscented_correction, unscented_moments, unscented_points
+
+    ut, x, S, _, _, sqrt_noise, z = unscented_problem(np.random.default_rng(40), 7, 6, 3, 0.5, 2.0)
+    x = x.copy()
+    x[2, 4] = np.nan
+
+    def step(x, S, z):
+        X = unscented_points(x, S, ut.gamma)
+        Y = X[..., :3] + 0.1 * np.sin(X[..., 3:]) ** 2
+        y_mean, Sy, failed_y = unscented_moments(Y, ut, sqrt_noise)
+        return (X, y_mean, Sy, failed_y, *unscented_correction(X, x, Y, y_mean, ut.wc, Sy, S, z))
+
+    batched = step(x, S, z)
+    assert batched[3].tolist() == [False, False, True, False, False, False, False]
+    assert batched[-1].tolist() == batched[3].tolist()
+    for i in range(7):
+        one = slice(i, i + 1)
+        for b, a in zip(batched, step(x[one], S[one], z[one]), strict=True):
+            np.testing.assert_array_equal(b[i], a[0])
+
+
 # --- the filter on both backends ---
 
 

@@ -15,9 +15,11 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
+from quadest.estimators import srukf as srukf_module
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import FilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
+from quadest.estimators.sigma_point import SquareRootSigmaPointFilter
 from quadest.estimators.srukf import SRUKF
 from quadest.models.functional import FunctionalModel, LinearGaussianModel
 from quadest.models.quadrotor_data import build_quadrotor_data
@@ -154,6 +156,42 @@ def test_srukf_equals_filterpy_ukf_on_quadrotor(quadrotor_data, alpha, beta, kap
         compared = max(compared, xs.shape[0])
     if w_c0_nonnegative(n, alpha, beta, kappa):
         assert compared >= 100
+
+
+class FamilySRUKF(SRUKF):
+    """The SR-UKF through the sigma-point family's steps only (the reference of the fused path)."""
+
+    predict = SquareRootSigmaPointFilter.predict
+    update = SquareRootSigmaPointFilter.update
+
+
+@pytest.mark.parametrize(("alpha", "beta", "kappa"), GRID)
+def test_fused_srukf_steps_equal_the_sigma_point_family_on_quadrotor(quadrotor_data, alpha, beta, kappa, monkeypatch):
+    """On the compiled backend the plain SR-UKF steps through :mod:`quadest.numerics.unscented`;
+    it must give the family's numbers (the same tolerance as against filterpy) and flag the same
+    runs at the same steps."""
+    from quadest.numerics import unscented
+
+    calls = []
+    moments = unscented.unscented_moments
+    monkeypatch.setattr(srukf_module, "unscented_moments", lambda *a: calls.append(1) or moments(*a))
+    data = quadrotor_data
+    n = data.model.n
+    kappa = 0.0 if kappa == "zero" else 3.0 - n
+    u, z = quadrotor_io(data)
+    P0 = np.broadcast_to(data.P0, (data.x0.shape[0], n, n))
+    tol_x, tol_P = tolerances(data.model, data.x0, P0, u, z, alpha, beta, kappa)
+    fused_fail, family_fail = {}, {}
+    fused = run_filter(SRUKF(data.model, alpha, beta, kappa), data.model, data.x0, P0, u, z, fused_fail)
+    assert len(calls) == 2 * (u.shape[1] - 1)
+    family = run_filter(FamilySRUKF(data.model, alpha, beta, kappa), data.model, data.x0, P0, u, z, family_fail)
+    assert len(calls) == 2 * (u.shape[1] - 1)
+    assert fused_fail == family_fail
+    for i in range(data.x0.shape[0]):
+        alive = fused_fail.get(i, u.shape[1]) - 1
+        if alive:
+            assert relative(fused[0][:alive, i], family[0][:alive, i]) <= tol_x
+            assert relative(fused[1][:alive, i], family[1][:alive, i]) <= tol_P
 
 
 def linear_problem(seed: int = 7):

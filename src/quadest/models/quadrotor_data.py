@@ -116,37 +116,85 @@ def data_labels(cfg, flown: Scenario) -> dict:
     }  # fmt: skip
 
 
-def record_quadrotor_data(cfg, streams: dict, flown: Scenario, truth: TruthTrajectory) -> MonteCarloData:
-    """What the filters see of ``truth``, however it was flown: MIMU and encoders measured from the
-    runs' streams, the filter model bound to the assumed sensor errors, and the initial estimates."""
-    scfg, T, runs = cfg.sensor, float(cfg.sample_period), len(streams["start"])
+def _measure(cfg, streams: dict, truth: TruthTrajectory) -> tuple[np.ndarray, np.ndarray, TriadErrors, TriadErrors]:
+    """``(measurements (B, K+1, 6), inputs (B, K+1, 4), accel errors, gyro errors)``: the MIMU and
+    the encoders of ``truth`` for the runs of ``streams``, with the triads' drawn errors."""
+    scfg, T = cfg.sensor, float(cfg.sample_period)
     (accel, gyro), (accel_errors, gyro_errors), (accel_law, gyro_law) = _triads(cfg, streams)
     z_acc = measure_triad(accel, accel_errors, truth.specific_force, T, streams["accel_noise"], accel_law)
     z_gyro = measure_triad(gyro, gyro_errors, truth.state[..., 9:12], T, streams["gyro_noise"], gyro_law)
     u = measure_rotor_speeds(
         truth.state[..., 12:16], int(scfg.encoder.lines), float(scfg.encoder.noise_std), T, streams["encoder"]
     )
+    return np.concatenate([z_acc, z_gyro], axis=-1), u, accel_errors, gyro_errors
+
+
+def record_quadrotor_data(cfg, streams: dict, flown: Scenario, truth: TruthTrajectory) -> MonteCarloData:
+    """What the filters see of ``truth``, however it was flown: MIMU and encoders measured from the
+    runs' streams, the filter model bound to the assumed sensor errors, and the initial estimates."""
+    z, u, accel_errors, gyro_errors = _measure(cfg, streams, truth)
     model = quadrotor_filter_model(cfg, accel_errors, gyro_errors)
     x_true = model.truth_to_state(truth.state)
-    x0, P0 = initial_condition(cfg, model.state_names, x_true[:, 0], streams)
     companion_truth = model.truth_to_companion(truth.state)
+    return _data(cfg, streams, flown, model, truth.time, x_true, companion_truth, u, z)
+
+
+def _data(cfg, streams: dict, flown: Scenario, model, time, x_true, companion_truth, u, z) -> MonteCarloData:
+    """The :class:`MonteCarloData` of the recorded arrays, with the initial estimates drawn from
+    the runs' ``"initial"`` streams."""
+    x0, P0 = initial_condition(cfg, model.state_names, x_true[:, 0], streams)
     return MonteCarloData(
         model=model,
-        time=truth.time,
+        time=time,
         truth=x_true,
         companion_truth=companion_truth,
         inputs=u,
-        measurements=np.concatenate([z_acc, z_gyro], axis=-1),
+        measurements=z,
         x0=x0,
         P0=P0,
         companion0=companion_truth[:, 0].copy(),
-        estimator_seeds=run_seed_sequences(int(cfg.seed), runs)["estimator"],
+        estimator_seeds=run_seed_sequences(int(cfg.seed), len(streams["start"]))["estimator"],
         labels=data_labels(cfg, flown),
     )
 
 
+DATA_CHUNK_RUNS = 100
+
+
 def build_quadrotor_data(cfg) -> MonteCarloData:
-    """Fly the scenario for ``cfg.runs`` runs and record what the filters see."""
-    streams = run_streams(int(cfg.seed), int(cfg.runs))
-    _params, flown, truth = fly_scenario(cfg, streams)
-    return record_quadrotor_data(cfg, streams, flown, truth)
+    """Fly the scenario for ``cfg.runs`` runs and record what the filters see.
+
+    The runs are flown and measured ``DATA_CHUNK_RUNS`` at a time, each chunk from its runs' own
+    streams, and only what the filters see is kept (the filter state, the companion values, the
+    inputs and the measurements of each sample), so the 16-state truth, the specific force and
+    the sensors' noise arrays exist for one chunk at a time. Every run is the run flown alone
+    (each run's generators, element-wise arithmetic), so the data do not depend on the chunking.
+    """
+    runs = int(cfg.runs)
+    streams = run_streams(int(cfg.seed), runs)
+    arrays: list[np.ndarray] = []
+    errors: list[tuple[TriadErrors, TriadErrors]] = []
+    time = flown = None
+    for first in range(0, runs, DATA_CHUNK_RUNS):
+        chunk = slice(first, min(first + DATA_CHUNK_RUNS, runs))
+        sub = {name: generators[chunk] for name, generators in streams.items()}
+        _params, flown, truth = fly_scenario(cfg, sub)
+        z, u, accel_errors, gyro_errors = _measure(cfg, sub, truth)
+        model = quadrotor_filter_model(cfg, accel_errors, gyro_errors)
+        parts = (model.truth_to_state(truth.state), model.truth_to_companion(truth.state), u, z)
+        if not arrays:
+            arrays = [np.empty((runs, *part.shape[1:])) for part in parts]
+        for out, part in zip(arrays, parts, strict=True):
+            out[chunk] = part
+        errors.append((accel_errors, gyro_errors))
+        time = truth.time
+        del truth, parts, z, u
+    model = quadrotor_filter_model(cfg, *(_concatenate([e[i] for e in errors]) for i in (0, 1)))
+    return _data(cfg, streams, flown, model, time, *arrays)
+
+
+def _concatenate(errors: list[TriadErrors]) -> TriadErrors:
+    """The triad errors of consecutive chunks of runs as one batch."""
+    return TriadErrors(
+        *(np.concatenate([getattr(e, name) for e in errors]) for name in ("matrix", "asymmetry", "bias"))
+    )

@@ -12,7 +12,8 @@ passes over all sigma points, for a batch of sigma points ``x`` (B, K, n) of run
   triad's deterministic errors ``(I + S + M) y + S± ⊙ sgn(y) y + b0`` (thesis §5.3.1).
 
 ``p`` is ``quadest.models.quadrotor.packed_params``. The thesis formulation takes the angles from ``u[:, 4:7]`` (one
-set per run, so their sines and cosines are computed once per run), the augmented one from the state.
+set per run, so their sines and cosines are computed once per run, before the loop over the points),
+the augmented one from the state.
 """
 
 from __future__ import annotations
@@ -41,6 +42,14 @@ def _inputs(p: np.ndarray, s: np.ndarray) -> tuple[float, float, float, float, f
 
 
 @njit(**_JIT)
+def _trig(phi: float, theta: float, psi: float) -> tuple[float, float, float, float, float, float, float, float]:
+    """``sin φ, cos φ, sin θ, cos θ, sin ψ, cos ψ, tan θ, sec θ``: once per run for the thesis
+    formulation (angles from the input), once per point for the augmented one."""
+    ct = math.cos(theta)
+    return math.sin(phi), math.cos(phi), math.sin(theta), ct, math.sin(psi), math.cos(psi), math.tan(theta), 1.0 / ct
+
+
+@njit(**_JIT)
 def quadrotor_f(x: np.ndarray, u: np.ndarray, p: np.ndarray, thesis: bool, T: float, out: np.ndarray) -> None:
     """``out = f(x, u)`` for sigma points ``x`` (B, K, n); the rates sit at 3:6 (thesis) or 6:9."""
     B, K, _ = x.shape
@@ -52,12 +61,11 @@ def quadrotor_f(x: np.ndarray, u: np.ndarray, p: np.ndarray, thesis: bool, T: fl
         a = U1 / p[_MASS]
         jw = p[_JR] * omega_r
         phi, theta, psi = (u[b, 4], u[b, 5], u[b, 6]) if thesis else (0.0, 0.0, 0.0)
+        sf, cf, st, ct, sp, cp, tt, sec = _trig(phi, theta, psi)
         for k in range(K):
             if not thesis:
                 phi, theta, psi = x[b, k, 3], x[b, k, 4], x[b, k, 5]
-            sf, cf, st, ct = math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta)
-            sp, cp = math.sin(psi), math.cos(psi)
-            tt, sec = math.tan(theta), 1.0 / math.cos(theta)
+                sf, cf, st, ct, sp, cp, tt, sec = _trig(phi, theta, psi)
             v0, v1, v2 = x[b, k, 0], x[b, k, 1], x[b, k, 2]
             out[b, k, 0] = v0 + T * ((cp * st * cf + sp * sf) * a - kt0 * v0)
             out[b, k, 1] = v1 + T * ((sp * st * cf - cp * sf) * a - kt1 * v1)
@@ -110,11 +118,11 @@ def quadrotor_h(
     for b in range(B):
         U1 = _inputs(p, u[b])[0]
         phi, theta, psi = (u[b, 4], u[b, 5], u[b, 6]) if thesis else (0.0, 0.0, 0.0)
+        sf, cf, st, ct, sp, cp, _, _ = _trig(phi, theta, psi)
         for k in range(K):
             if not thesis:
                 phi, theta, psi = x[b, k, 3], x[b, k, 4], x[b, k, 5]
-            sf, cf, st, ct = math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta)
-            sp, cp = math.sin(psi), math.cos(psi)
+                sf, cf, st, ct, sp, cp, _, _ = _trig(phi, theta, psi)
             d0, d1, d2 = kt0 * x[b, k, 0], kt1 * x[b, k, 1], kt2 * x[b, k, 2]
             f0 = -(cp * ct * d0 + sp * ct * d1 - st * d2)
             f1 = -((cp * st * sf - sp * cf) * d0 + (sp * st * sf + cp * cf) * d1 + ct * sf * d2)

@@ -39,7 +39,7 @@ from functools import cache
 
 import numpy as np
 
-from quadest.numerics.sigma_points import ut_weights
+from quadest.numerics.sigma_points import UTWeights, ut_weights
 
 
 def _t(a: np.ndarray) -> np.ndarray:
@@ -127,27 +127,28 @@ class UnscentedRule(IntegrationRule):
     kappa: float = 0.0
     name: str = "unscented"
 
-    def _ut(self, n: int):
+    def ut(self, n: int) -> UTWeights:
+        """Scaling and weights of the UT in dimension ``n`` (eqs 5.2–5.6), computed once."""
         return _cached_ut(n, self.alpha, self.beta, self.kappa)
 
     def unit_points(self, n: int) -> np.ndarray:
-        g = self._ut(n).gamma
+        g = self.ut(n).gamma
         return np.concatenate([np.zeros((1, n)), g * np.eye(n), -g * np.eye(n)])
 
     def weights(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        w = self._ut(n)
+        w = self.ut(n)
         return w.wm, w.wc
 
     def offsets(self, S: np.ndarray) -> np.ndarray:
         """``[0, γ S, −γ S]`` (eqs 5.7, 5.15, 5.20): column ``i`` of ``S`` gives point ``i``."""
-        cols = self._ut(S.shape[-1]).gamma * _t(S)
+        cols = self.ut(S.shape[-1]).gamma * _t(S)
         return np.concatenate([np.zeros_like(cols[..., :1, :]), cols, -cols], axis=-2)
 
     def sqrt_columns(self, D: np.ndarray, n: int) -> np.ndarray:
-        return np.sqrt(self._ut(n).wc[1]) * _t(D[..., 1:, :])
+        return np.sqrt(self.ut(n).wc[1]) * _t(D[..., 1:, :])
 
     def rank_one_terms(self, D: np.ndarray, n: int) -> list[tuple[np.ndarray, float]]:
-        wc0 = self._ut(n).wc[0]
+        wc0 = self.ut(n).wc[0]
         return [(np.sqrt(abs(wc0)) * D[..., 0, :, None], 1.0 if wc0 >= 0 else -1.0)]
 
 

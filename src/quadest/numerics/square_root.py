@@ -29,6 +29,7 @@ import numpy as np
 from quadest.errors import ConfigError, DowndateError
 
 KERNELS_ENV = "QUADEST_KERNELS"
+DOWNDATE_FAILED = "Cholesky downdate would make the covariance indefinite"
 KERNEL_BACKENDS = ("numba", "numpy")
 
 
@@ -82,12 +83,17 @@ def warm_up(model: object | None = None) -> None:
 
 @cache
 def _load_square_root_kernels() -> None:
-    """One call of each square-root kernel on a batch of one 1 × 1 factor (same types as any call)."""
+    """One call of each square-root kernel, and of the SR-UKF's fused steps
+    (:mod:`quadest.numerics.unscented`), on a batch of one 1 × 1 factor (same types as any call)."""
     S = np.ones((1, 1, 1))
     qr_factor(S)
     cholupdate(S, S, 1.0)
     kalman_gain(S, S)
     whiten(S, S[:, 0])
+    kernels, x, X, w, failed = _compiled(), np.ones((1, 1)), np.ones((1, 3, 1)), np.ones(3), np.zeros(1, dtype=bool)
+    kernels.unscented_points_kernel(x, S, 1.0, X)
+    kernels.unscented_moments_kernel(X, w, 1.0, 1.0, True, S[0], x.copy(), S.copy(), failed)
+    kernels.unscented_correction_kernel(X, x, X, x, w, S, S, x, x.copy(), S.copy(), x.copy(), failed)
 
 
 def _as_batch(a: np.ndarray, core: int) -> np.ndarray:
@@ -154,7 +160,7 @@ def whiten(S: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 
 def _raise_downdate_error(result: np.ndarray, failed: np.ndarray) -> None:
-    err = DowndateError("Cholesky downdate would make the covariance indefinite", np.flatnonzero(failed))
+    err = DowndateError(DOWNDATE_FAILED, np.flatnonzero(failed))
     err.result = result
     raise err
 
