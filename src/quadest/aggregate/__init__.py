@@ -20,9 +20,15 @@ Writes into ``SWEEP_DIR/aggregate/``:
   group; RMSE vs sensor error scale per estimator with 95 % error bars; a per-state RMSE bar chart;
 - ``report.md``: all of the above, the commit and the sweep's overrides.
 
+With ``output: compact`` under the callback (``quadest-aggregate SWEEP_DIR --output compact``) it
+writes instead the compact aggregate of a large grid, one row per cell
+(:mod:`~quadest.aggregate.compact`).
+
 One module per job: :mod:`~quadest.aggregate.sweep` reads the folder,
 :mod:`~quadest.aggregate.statistics` computes the confidence intervals and tables,
-:mod:`~quadest.aggregate.figures` draws, :mod:`~quadest.aggregate.report` writes everything,
+:mod:`~quadest.aggregate.figures` draws, :mod:`~quadest.aggregate.versus_best` compares each cell
+with the best, :mod:`~quadest.aggregate.compact` writes the compact aggregate,
+:mod:`~quadest.aggregate.report` writes everything,
 :mod:`~quadest.aggregate.callback` and :mod:`~quadest.aggregate.cli` are the two ways in. The
 Markdown and LaTeX rendering is shared with the job (:mod:`quadest.formatting`).
 """

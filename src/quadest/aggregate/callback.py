@@ -1,7 +1,8 @@
 """The Hydra callbacks that finish an experiment when its run or multirun ends (``hydra.callbacks``
 in an experiment file), so that one command makes every file the docs and the ledger read:
 
-- :class:`AggregateCallback`: aggregate a sweep (:func:`quadest.aggregate.report.aggregate`);
+- :class:`AggregateCallback`: aggregate a sweep (:func:`quadest.aggregate.report.aggregate`), in
+  full or compact (``output: compact`` under the callback, for large grids);
 - :class:`RankingCallback`: seed 004's ranking of a job or a sweep (:mod:`quadest.aggregate.ranking`);
 - :class:`ParticleCountCallback`: seed 001's particle-count figure and efficiency of a job, and the
   process-noise trend of a sweep over ``model.Q`` (:mod:`quadest.aggregate.particle_count`).
@@ -12,12 +13,15 @@ stays for folders made elsewhere.
 
 from __future__ import annotations
 
+import sys
+import time
 from pathlib import Path
 
 from hydra.experimental.callback import Callback
 
 from quadest.aggregate import particle_count, ranking
-from quadest.aggregate.report import aggregate
+from quadest.aggregate.report import aggregate, check_output
+from quadest.errors import ConfigError
 
 
 def _finished_job(config) -> Path | None:
@@ -30,10 +34,28 @@ def _finished_job(config) -> Path | None:
 
 
 class AggregateCallback(Callback):
-    """Hydra callback: aggregate the sweep folder when a multirun ends."""
+    """Hydra callback: aggregate the sweep folder when a multirun ends, with the wall time from the
+    start of the multirun to the end of its last job.
+
+    ``output`` (``hydra.callbacks.aggregate.output``): ``full`` (every table and figure) or
+    ``compact`` (:mod:`quadest.aggregate.compact`). Hydra builds its callbacks before the sweep
+    starts, so any other value ends the command there with one line and exit code 2.
+    """
+
+    def __init__(self, output: str = "full") -> None:
+        try:
+            self.output = check_output(output)
+        except ConfigError as exc:
+            print(f"quadest: error: {exc}", file=sys.stderr)
+            sys.exit(2)
+        self._start: float | None = None
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        self._start = time.perf_counter()
 
     def on_multirun_end(self, config, **kwargs) -> None:
-        report = aggregate(Path(config.hydra.sweep.dir))
+        wall_time = None if self._start is None else time.perf_counter() - self._start
+        report = aggregate(Path(config.hydra.sweep.dir), output=self.output, wall_time=wall_time)
         print(f"Aggregated: {report}")
 
 

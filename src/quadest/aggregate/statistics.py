@@ -54,10 +54,15 @@ def tables(cells: pd.DataFrame, params: list[str]) -> dict[str, pd.DataFrame]:
     rmse = rmse.pivot_table(index=keys, columns="state", values="cell", aggfunc="first", sort=False).reset_index()
     rmse.columns.name = None
     per_job = filt.groupby(keys, sort=False).agg(diverged=("diverged", "max"), runs=("runs", "max")).reset_index()
-    per_cell = filt.drop_duplicates(["job", "estimator"])
+    return {"rmse": rmse, "best_cells": best_cells(cells, params), "divergence": per_job, "timing": timing_table(cells)}
+
+
+def timing_table(cells: pd.DataFrame) -> pd.DataFrame:
+    """Per estimator: mean and std over the jobs of its time per step and run (µs), and the jobs."""
+    per_cell = _filter_states(cells).drop_duplicates(["job", "estimator"])
     timing = per_cell.groupby("estimator", sort=False)["step_time_us"].agg(["mean", "std", "count"]).reset_index()
     timing.columns = ["estimator", "step_time_us_mean", "step_time_us_std", "jobs"]
-    return {"rmse": rmse, "best_cells": best_cells(cells, params), "divergence": per_job, "timing": timing.round(2)}
+    return timing.round(2)
 
 
 def paired_summary(paired: pd.DataFrame, params: list[str]) -> pd.DataFrame:

@@ -24,6 +24,8 @@ such as the EKF or a baseline at fixed parameters) is left out.
 
 from __future__ import annotations
 
+import io
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -32,6 +34,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from PIL import Image
 from scipy.stats import t as student_t
 
 from quadest.paired import CONFIDENCE, ROUND_OFF
@@ -114,47 +117,114 @@ def versus_best(scores: pd.DataFrame, params: list[str]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def heat_maps(table: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
-    """One α × β heat map per estimator and state group (rows: κ; columns: panels)."""
+def versus_best_counts(table: pd.DataFrame) -> pd.DataFrame:
+    """Per estimator and state group of a :func:`versus_best` table: its cells and how many of them
+    differ from their panel's best."""
+    counts = table.groupby(["estimator", "group"], sort=False).agg(
+        cells=("job", "size"), differ_from_best=("differs", "sum")
+    )
+    return counts.reset_index()
+
+
+@dataclass(frozen=True)
+class HeatMapStyle:
+    """How a heat-map figure is drawn and stored: inches per subplot, resolution, whether the
+    subplots of one panel (column) share one colour scale and colour bar (else each has its own),
+    and, if set, the size of the colour palette the PNG is stored with (a palette PNG of a few
+    flat colours is several times smaller than RGBA)."""
+
+    subplot_size: tuple[float, float]
+    dpi: int
+    shared_scale: bool = False
+    palette: int | None = None
+
+
+FULL_STYLE = HeatMapStyle(subplot_size=(3.4, 2.8), dpi=90)
+"""The full aggregate's heat maps: one colour bar per subplot."""
+COMPACT_STYLE = HeatMapStyle(subplot_size=(2.3, 1.6), dpi=80, shared_scale=True, palette=128)
+"""The compact aggregate's (:mod:`quadest.aggregate.compact`): a 1000-cell grid's figure of 5 κ ×
+4 panels stays legible at about 750 × 700 pixels, one colour bar per panel."""
+
+
+def _save_png(fig, path: Path, style: HeatMapStyle) -> None:
+    """Save ``fig`` as PNG at the style's resolution, as a palette PNG if the style has one (fast
+    octree quantisation keeps the rare red of the best cell's star, which median cut merges away;
+    Pillow is matplotlib's own PNG writer)."""
+    if style.palette is None:
+        fig.savefig(path, dpi=style.dpi)
+        return
+    buffer = io.BytesIO()
+    fig.savefig(buffer, dpi=style.dpi)
+    image = Image.open(buffer).convert("RGB").quantize(colors=style.palette, method=Image.Quantize.FASTOCTREE)
+    image.save(path, optimize=True)
+
+
+def heat_maps(table: pd.DataFrame, params: list[str], out: Path, style: HeatMapStyle = FULL_STYLE) -> list[Path]:
+    """One α × β heat map per estimator and state group (rows: κ; columns: panels), drawn in
+    ``style``; a cell missing from the grid stays blank."""
     alpha, beta, kappa = (ut_parameter(params, name) for name in UT_PARAMETERS)
     if table.empty or not (alpha and beta):
         return []
     panel = [p for p in params if p.split(".")[-1] not in UT_PARAMETERS]
+    alphas, betas = sorted(table[alpha].unique()), sorted(table[beta].unique())
     made = []
     for (est, group), part in table.groupby(["estimator", "group"], sort=False):
         kappas = sorted(part[kappa].unique()) if kappa else [None]
         panels = list(part[panel].drop_duplicates().itertuples(index=False)) if panel else [()]
+        width, height = style.subplot_size
         fig, axes = plt.subplots(
-            len(kappas), len(panels), figsize=(3.4 * len(panels), 2.8 * len(kappas)), squeeze=False
+            len(kappas),
+            len(panels),
+            figsize=(width * len(panels), height * len(kappas)),
+            squeeze=False,
+            layout="constrained" if style.shared_scale else None,
         )
         for c, values in enumerate(panels):
             sel = part
             for key, value in zip(panel, values, strict=True):
                 sel = sel[sel[key] == value]
+            limits = {"vmin": sel["score_mean"].min(), "vmax": sel["score_mean"].max()} if style.shared_scale else {}
+            title = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(panel, values, strict=True))
             for r, kv in enumerate(kappas):
                 cells = sel if kv is None else sel[sel[kappa] == kv]
-                grid = cells.pivot_table(index=beta, columns=alpha, values="score_mean")
+                grid = cells.pivot_table(index=beta, columns=alpha, values="score_mean").reindex(
+                    index=betas, columns=alphas
+                )
                 differs = cells.pivot_table(index=beta, columns=alpha, values="differs", aggfunc="any")
                 is_best = cells.assign(b=cells["job"] == cells["best_job"]).pivot_table(
                     index=beta, columns=alpha, values="b", aggfunc="any"
                 )
                 ax = axes[r, c]
-                im = ax.imshow(grid.to_numpy(), aspect="auto", origin="lower", cmap="viridis")
+                im = ax.imshow(grid.to_numpy(), aspect="auto", origin="lower", cmap="viridis", **limits)
                 ys, xs = np.nonzero(differs.reindex_like(grid).fillna(False).to_numpy().astype(bool))
                 ax.plot(xs, ys, "w.", ms=4)
                 ys, xs = np.nonzero(is_best.reindex_like(grid).fillna(False).to_numpy().astype(bool))
                 ax.plot(xs, ys, "r*", ms=8)
                 ax.set_xticks(range(grid.shape[1]), [f"{a:g}" for a in grid.columns], fontsize=6, rotation=90)
                 ax.set_yticks(range(grid.shape[0]), [f"{b:g}" for b in grid.index], fontsize=6)
-                ax.set_xlabel("α", fontsize=8)
-                ax.set_ylabel("β", fontsize=8)
-                title = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(panel, values, strict=True))
-                ax.set_title(title + (f", κ={kv:g}" if kv is not None else ""), fontsize=7)
-                fig.colorbar(im, ax=ax)
+                kappa_label = f"κ={kv:g}" if kv is not None else ""
+                if not style.shared_scale:
+                    ax.set_xlabel("α", fontsize=8)
+                    ax.set_ylabel("β", fontsize=8)
+                    ax.set_title(title + (f", {kappa_label}" if kappa_label else ""), fontsize=7)
+                    fig.colorbar(im, ax=ax)
+                    continue
+                if r == 0:
+                    ax.set_title(title, fontsize=7)
+                if r == len(kappas) - 1:
+                    ax.set_xlabel("α", fontsize=7)
+                else:
+                    ax.tick_params(labelbottom=False)
+                if c == 0:
+                    ax.set_ylabel(f"{kappa_label}\nβ" if kappa_label else "β", fontsize=7)
+            if style.shared_scale:
+                bar = fig.colorbar(im, ax=axes[:, c].tolist(), location="bottom", shrink=0.9, aspect=25)
+                bar.ax.tick_params(labelsize=6)
         fig.suptitle(f"{est}, {group}: mean RMSE; • differs from ★ (paired 95 % CI)", fontsize=9)
-        fig.tight_layout()
+        if not style.shared_scale:
+            fig.tight_layout()
         path = out / f"versus_best_{est}_{group.replace(' ', '_')}.png"
-        fig.savefig(path, dpi=90)
+        _save_png(fig, path, style)
         plt.close(fig)
         made.append(path)
     return made
