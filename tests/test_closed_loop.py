@@ -31,6 +31,24 @@ from quadest.montecarlo.streams import run_seed_sequences, run_streams
 # the truth flown per scenario (default config), and build_quadrotor_data's arrays with
 # model.formulation=augmented and sensor.encoder.noise_std=0.5.
 REFERENCE = Path(__file__).parent / "data" / "open_loop_truth_reference.npz"
+EPS = np.finfo(float).eps
+
+# How far a stored array may move: its truth is N = TRUTH_STEPS chained RK4 steps (100 samples
+# of 10 substeps), element-wise arithmetic whose sin and cos another numpy or libm may round an
+# ulp differently. Re-rounding the state after every step by up to 8 ulps moved every array by
+# at most 0.63 eps * N * max|array| (measured; 1 ulp: 0.12), so ROUND_OFF = 4 leaves a margin
+# of 6. A truth stepped with 9 or 11 substeps instead of 10 moves the arrays by
+# up to 170 and 105 of that unit, a flipped sign of the rotor gyroscopic or yaw-drag term by
+# 1e7, another seed by 1e9: all well outside.
+ROUND_OFF = 4.0
+TRUTH_STEPS = 1000
+
+
+def assert_near(got: np.ndarray, ref: np.ndarray, steps: int, what: str) -> None:
+    """``|got - ref| <= ROUND_OFF * eps * steps * max|ref|``: the round-off of ``steps`` chained
+    floating-point steps, relative to the array's largest value (its columns are coupled)."""
+    atol = ROUND_OFF * EPS * steps * np.abs(ref).max()
+    np.testing.assert_allclose(got, ref, rtol=0.0, atol=atol, err_msg=what)
 
 
 def _cfg(*overrides: str):
@@ -41,21 +59,32 @@ def _estimator(cfg, label: str, model) -> Estimator:
     return build_estimator(label, OmegaConf.to_container(cfg.estimator[label], resolve=True), model)
 
 
-def test_the_open_loop_data_are_bit_for_bit_the_pre_change_ones():
+def test_the_open_loop_data_are_the_pre_change_ones():
+    """Exact where no rounding can differ: P0 (products of config values), the encoder readings
+    (whole quanta; a rounding change flips one only within ~1e-12 of a half quantum) and sample 0
+    (the seed-drawn start at rest). x0 is the exact start plus L0 w (a Cholesky factor and an
+    n-term product: n steps of round-off); the rest is the flown truth."""
     data = build_quadrotor_data(_cfg("model.formulation=augmented", "sensor.encoder.noise_std=0.5"))
     with np.load(REFERENCE) as ref:
-        for key in ("truth", "companion_truth", "inputs", "measurements", "x0", "P0"):
+        for key in ("P0", "inputs"):
             assert np.array_equal(getattr(data, key), ref[f"open_data/{key}"]), key
+        for key in ("truth", "companion_truth"):
+            assert np.array_equal(getattr(data, key)[:, 0], ref[f"open_data/{key}"][:, 0]), f"{key} at sample 0"
+        assert_near(data.x0, ref["open_data/x0"], data.x0.shape[-1], "x0")
+        for key in ("truth", "companion_truth", "measurements"):
+            assert_near(getattr(data, key), ref[f"open_data/{key}"], TRUTH_STEPS, key)
 
 
 @pytest.mark.parametrize("scenario", ["figure8", "attitude_steps"])
-def test_truth_loop_reproduces_the_open_loop_truth_bit_for_bit(scenario):
+def test_truth_loop_reproduces_the_open_loop_truth(scenario):
+    """Close to the stored pre-change truth (see ROUND_OFF), exact at the seed-drawn start; and
+    bit for bit the open loop's truth and data flown today."""
     cfg = _cfg(f"scenario={scenario}", "loop=truth")
     flight, data = QuadrotorLoop.from_config(cfg).fly_shared("truth")
     with np.load(REFERENCE) as ref:
-        assert np.array_equal(flight.truth.state, ref[f"{scenario}/state"])
-        assert np.array_equal(flight.truth.specific_force, ref[f"{scenario}/specific_force"])
-        assert np.array_equal(flight.truth.command, ref[f"{scenario}/command"])
+        assert np.array_equal(flight.truth.state[:, 0], ref[f"{scenario}/state"][:, 0])
+        for key in ("state", "specific_force", "command"):
+            assert_near(getattr(flight.truth, key), ref[f"{scenario}/{key}"], TRUTH_STEPS, key)
     _, _, today = fly_scenario(cfg, run_streams(int(cfg.seed), int(cfg.runs)))
     assert np.array_equal(flight.truth.state, today.state)
     open_loop = build_quadrotor_data(cfg)  # what the estimators see is the open loop's too

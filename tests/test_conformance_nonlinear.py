@@ -36,6 +36,14 @@ REFERENCE = {
 }
 
 
+def registered(name: str) -> type:
+    """The class registered as ``name``; a missing one fails here rather than skipping, which
+    would pass the suite without checking it."""
+    specs = builtin_estimators()
+    assert name in specs, f"{name!r} has reference moments here but is not registered; registered: {sorted(specs)}"
+    return specs[name].cls
+
+
 @dataclass
 class PlainUKFParams:
     kind: str = "plain_ukf"
@@ -158,17 +166,13 @@ def test_ut_filters_have_the_closed_form_moments(cls, params):
 
 @pytest.mark.parametrize("name", sorted(REFERENCE))
 def test_other_sigma_point_filters_have_their_rules_moments(name):
-    spec = builtin_estimators().get(name)
-    assert spec is not None, f"{name} has reference moments here but is not registered"
-    check_sigma_point_moments(spec.cls, **REFERENCE[name])
+    check_sigma_point_moments(registered(name), **REFERENCE[name])
 
 
 @pytest.mark.parametrize("h", [1.0, 3.0])
 def test_central_difference_filters_follow_their_step(h):
     for name in ("cdkf", "srcdkf"):
-        spec = builtin_estimators().get(name)
-        assert spec is not None, f"{name} is not registered"
-        check_sigma_point_moments(spec.cls, {"h": h}, reference="central_difference")
+        check_sigma_point_moments(registered(name), {"h": h}, reference="central_difference")
 
 
 def test_ckf_is_the_ut_with_alpha_one_beta_zero_kappa_zero_not_an_exact_rule():

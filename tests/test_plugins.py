@@ -3,6 +3,8 @@ plugins, an external package installed beside quadest, and the errors a plugin a
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import os
 import subprocess
 import sys
@@ -16,28 +18,101 @@ from helpers import compose_config, random_spd, run_filter, simulate, smooth_mod
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.cubature import CKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
-from quadest.estimators.registry import builtin_estimators
+from quadest.estimators.params import Range, parameter_problem
+from quadest.estimators.registry import EstimatorSpec, builtin_estimators, make_estimator
 from quadest.job import run_job
+from quadest.models.attitude import AttitudeFilterModel
+from quadest.models.base import FilterModel
 from quadest.models.quadrotor_data import build_quadrotor_data
-from quadest.testing import check_estimator
+from quadest.testing import check_estimator, linear_gaussian_problem
 from target_plugin import Crashes, LinearizedKF
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "quadest-iekf"
-BAD_UT = [{"alpha": 0.0}, {"alpha": -1.0}, {"alpha": 1.0, "kappa": -10.0}]
+ANCHORS = "quadest.estimators.ahrs_anchors"
+
+# Estimators with nothing to refuse, each with the reason; a new estimator is not added here
+# without one.
+NO_BAD_PARAMETERS = {
+    "ekf": "its Params declares no parameter",
+    "hckf": "its one parameter, the flag augmented, declares no range or choices",
+}
+# An invalid value the filter refuses although no range declares it.
+CHECKED_FLAGS = {"mekf": [{"reset_jacobian": "yes"}]}
+
+
+def outside(rng: Range) -> list[float]:
+    """The values nearest each declared bound on its wrong side, a fraction for an integer, and a
+    non-finite value when nothing else is excluded."""
+    values = [b for b in (rng.gt, rng.lt) if b is not None]
+    if rng.ge is not None:
+        values.append(rng.ge - 1 if rng.integer else math.nextafter(rng.ge, -math.inf))
+    if rng.le is not None:
+        values.append(rng.le + 1 if rng.integer else math.nextafter(rng.le, math.inf))
+    if rng.integer:
+        values.append(next((b for b in (rng.ge, rng.gt) if b is not None), 0) + 1.5)
+    return values or [math.nan]
+
+
+def model_for(spec: EstimatorSpec) -> FilterModel:
+    if spec.cls.__module__ == ANCHORS:
+        return AttitudeFilterModel(0.01, [0.0, 0.0, 9.81], [21.5, 0.0, 43.1], 1e-6 * np.eye(9), np.eye(3), np.eye(3))
+    return linear_gaussian_problem()[0]
+
+
+def bad_parameters(spec: EstimatorSpec) -> list[dict]:
+    """Values the declarations of ``spec.params`` forbid, kept only if ``parameter_problem``
+    refuses them: each ranged field just outside each bound, a word for each other field (an
+    unknown choice option, a malformed initial range) and the UT's n + κ ≤ 0; then the checked
+    flags."""
+    n = model_for(spec).n
+    candidates = []
+    for f in dataclasses.fields(spec.params):
+        rng = f.metadata.get("range")
+        candidates += [{f.name: value} for value in outside(rng)] if rng else [{f.name: "no_such_option"}]
+    if {"alpha", "kappa"} <= set(spec.params.__dataclass_fields__):
+        candidates.append({"alpha": 1.0, "kappa": -n - 1.0})
+    return [bad for bad in candidates if parameter_problem(spec.params, bad, n)] + CHECKED_FLAGS.get(spec.name, [])
 
 
 @pytest.mark.parametrize("name", sorted(builtin_estimators()))
 def test_every_builtin_estimator_passes_conformance(name):
     spec = builtin_estimators()[name]
-    if spec.cls.__module__ == "quadest.estimators.ahrs_anchors":
+    if spec.cls.__module__ == ANCHORS:
         pytest.skip("an ahrs anchor needs the attitude model, not a linear one: tests/test_ahrs_anchors.py")
     ut = "alpha" in {f for f in spec.params.__dataclass_fields__}
     gaussian = "random" not in spec.cls.capabilities  # a particle filter only approaches the Kalman filter
     params = {"alpha": 0.5} if ut else {}
     if "huber_threshold" in spec.params.__dataclass_fields__:
         params["huber_threshold"] = 1e12  # a Huber filter is the Kalman filter only as γ → ∞ (test_robust.py)
-    check_estimator(spec.cls, params=params, bad_params=BAD_UT if ut else [], gaussian=gaussian)
+    check_estimator(spec.cls, params=params, bad_params=bad_parameters(spec), gaussian=gaussian)
+
+
+@pytest.mark.parametrize("name", sorted(builtin_estimators()))
+def test_every_builtin_estimator_is_given_bad_parameters(name):
+    """No estimator escapes the bad-parameter checks with an empty list; an exemption must hold."""
+    bad = bad_parameters(builtin_estimators()[name])
+    if name in NO_BAD_PARAMETERS:
+        assert not bad, f"{name} is exempt ({NO_BAD_PARAMETERS[name]}) but declares {bad} invalid"
+    else:
+        assert bad, f"{name}: no declared range, choice or checked flag gives a bad parameter; add one or exempt it"
+
+
+def bad_parameter_cases() -> list:
+    return [
+        pytest.param(name, bad, id=f"{name}-{'-'.join(f'{k}={v}' for k, v in bad.items())}")
+        for name, spec in sorted(builtin_estimators().items())
+        for bad in bad_parameters(spec)
+    ]
+
+
+@pytest.mark.parametrize(("name", "bad"), bad_parameter_cases())
+def test_bad_parameters_are_refused_at_construction_with_a_message_naming_them(name, bad):
+    """Every declared range is enforced by the estimator base class itself, not only by the
+    pre-run validation; this also covers the ahrs anchors and holds the message to the key."""
+    spec = builtin_estimators()[name]
+    with pytest.raises(ValueError, match="|".join(bad)):
+        make_estimator(spec.cls, model_for(spec), bad)
 
 
 def test_conformance_catches_a_wrong_filter():

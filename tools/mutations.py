@@ -377,6 +377,14 @@ MUTATIONS = (
         "out[b, k, 0] = 0.5 * v + 25.0 * v / (1.0 + v * v) + c[0]",
         (PARTICLE_KERNELS + "test_ungm_compiled_f_and_h_equal_the_numpy_reference",),
     ),
+    Mutation(
+        "declared parameter ranges checked only by the pre-run validation",
+        "src/quadest/estimators/base.py",
+        "                if problem is not None:\n                    raise ConfigError(*problem)\n",
+        "",
+        ("tests/test_plugins.py::test_bad_parameters_are_refused_at_construction_with_a_message_naming_them"
+         "[hf-huber_threshold=0.0]",),
+    ),
 )  # fmt: skip
 
 

@@ -31,12 +31,15 @@ exception inside a single-run estimator) is *flagged*: ``failed[i]`` becomes tru
 
 from __future__ import annotations
 
+import functools
+import inspect
 from abc import ABC, abstractmethod
 from typing import ClassVar
 
 import numpy as np
 
-from quadest.errors import FilterDivergence
+from quadest.errors import ConfigError, FilterDivergence
+from quadest.estimators.params import parameter_problem
 from quadest.models.base import FilterModel
 from quadest.numerics.square_root import warm_up
 
@@ -61,7 +64,46 @@ class _FailureLog:
                 self.failure_reasons[r] = reason
 
 
-class Estimator(_FailureLog, ABC):
+class _DeclaredParameters:
+    """Checks the declared parameter ranges and constraints of ``Params``
+    (:func:`~quadest.estimators.params.parameter_problem`) whenever an estimator is constructed,
+    before its own ``__init__`` runs: every subclass's ``__init__`` is wrapped, and the outermost
+    call checks the arguments against the class of the instance being built. A value the pre-run
+    validation refuses is thus refused by a direct construction too, with the same one-line
+    :class:`~quadest.errors.ConfigError`."""
+
+    Params: ClassVar[type | None] = None
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        init = cls.__dict__.get("__init__")
+        if init is None:
+            return
+        signature = inspect.signature(init)
+
+        @functools.wraps(init)
+        def checked_init(self, *args, **kw) -> None:
+            if not getattr(self, "_parameters_checked", False):
+                self._parameters_checked = True
+                bound = signature.bind(self, *args, **kw)
+                bound.apply_defaults()
+                values = dict(bound.arguments)
+                model = values.pop("model", None)
+                values.pop("self")
+                for name, parameter in signature.parameters.items():
+                    if parameter.kind is inspect.Parameter.VAR_KEYWORD:
+                        values.update(values.pop(name))
+                    elif parameter.kind is inspect.Parameter.VAR_POSITIONAL:
+                        values.pop(name)
+                problem = parameter_problem(type(self).Params, values, getattr(model, "n", 0))
+                if problem is not None:
+                    raise ConfigError(*problem)
+            init(self, *args, **kw)
+
+        cls.__init__ = checked_init
+
+
+class Estimator(_DeclaredParameters, _FailureLog, ABC):
     """A filter that advances a batch of runs: leading axis ``B`` on every array.
 
     A concrete estimator sets ``config_name`` (its name under ``conf/estimator/``) and ``Params``
@@ -131,7 +173,7 @@ class Estimator(_FailureLog, ABC):
             spread[self.failed] = safe_spread[self.failed]
 
 
-class SingleRunEstimator(ABC):
+class SingleRunEstimator(_DeclaredParameters, ABC):
     """A filter that works on one run: means (n,), covariances (n, n), inputs (nu,), z (m,).
 
     ``model`` is bound to that single run (a batch of one). Exceptions raised in any method mark

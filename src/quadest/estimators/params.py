@@ -4,8 +4,9 @@ A field declares what it allows with :func:`ranged`; a ``Params`` class may add 
 involve several fields or the state dimension with a static method
 ``constraints(values: Mapping, n: int) -> list[tuple[key, value, allowed]]``. The pre-run
 validation (:func:`parameter_problem`) reads both, so a new estimator's parameters are checked
-before any work starts without touching the validation code, and the metrics tables take their
-parameter columns from the same fields (:func:`parameter_names`).
+before any work starts without touching the validation code; the estimator base classes check them
+again at every construction (:class:`quadest.estimators.base.Estimator`); and the metrics tables
+take their parameter columns from the same fields (:func:`parameter_names`).
 """
 
 from __future__ import annotations
