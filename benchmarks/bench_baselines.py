@@ -19,7 +19,7 @@ run):
    (``QUADEST_KERNELS=numba|numpy``, docs/benchmarks.md), for scale against the baselines.
 
 The ratios printed are EKF / UKF from this run, against both the UKF as ``estimator=ukf`` runs it
-now and the previous per-run adapter (the UKF step issue 14's target was set against).
+now and the previous per-run adapter (the UKF step the target EKF ≤ 0.3× UKF was first set against).
 """
 
 from __future__ import annotations

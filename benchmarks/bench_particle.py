@@ -11,7 +11,7 @@ filters' kernels are loaded (or compiled) before any timing:
    ``filterpy.monte_carlo.stratified_resample`` (a Python loop over the particles; it draws from
    numpy's global generator, seeded here, because filterpy offers no other way);
 3. the wall time of the runner on the full experiment (100 runs × 1000 particles × 500 steps),
-   the issue's "under 60 s" target.
+   against the target of under 60 s for it.
 
 4. the same ``pf`` on the numpy references (``QUADEST_KERNELS=numpy``), each compiled particle
    kernel against its numpy reference (µs per call for the batch, and compiled ÷ numpy), and the

@@ -1,7 +1,7 @@
-"""The estimator in the control loop (issue 13): the plant flown on truth reproduces the open-loop
-truth bit for bit, every estimator flying its own truth sees the same draws, a diverging estimator
-crashes only its own vehicle, and the step-response metrics match a second-order system's
-analytic values."""
+"""The estimator in the control loop (the controller flies on its estimate): the plant flown on
+truth reproduces the open-loop truth bit for bit, every estimator flying its own truth sees the
+same draws, a diverging estimator crashes only its own vehicle, and the step-response metrics
+match a second-order system's analytic values."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The interfaces the next filter families build on (issue: sigma-point family):
+"""The interfaces the filter families beyond the EKF and UKF build on:
 
 1. estimator randomness (per-run generators from the experiment's SeedSequence, its own stream);
 2. noise as distributions (sampling and log-density on the model);

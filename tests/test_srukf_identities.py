@@ -2,7 +2,7 @@
 
 - SR-UKF ≡ filterpy 2.0 UKF (both redraw sigma points before the update; filterpy's Cholesky rows
   are the columns of the lower factor), on a random smooth model with correlated non-identity
-  P0, Q, R and m < n, and on both quadrotor filter models, over the issue's (α, β, κ) grid.
+  P0, Q, R and m < n, and on both quadrotor filter models, over α ∈ {1e-3, 0.5, 1} × β ∈ {0, 2} × κ ∈ {0, 3 − n}.
 - On a linear-Gaussian model SR-UKF, filterpy UKF and filterpy EKF equal filterpy's KalmanFilter.
 - The batched SR-UKF gives each run what that run gives alone.
 - A run whose covariance loses definiteness is flagged; the other runs keep their numbers.

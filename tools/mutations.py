@@ -16,9 +16,11 @@ they pass. The exit status is non-zero if any mutation is missed or a run errors
 mutations, the union of the named tests runs once on the unmutated copy: a test that fails
 without any bug catches nothing.
 
-The list covers the gaps of issue 15 (each had no failing test before), classic sigma-point
-bugs, and bugs of the kind that really happen which once passed the whole suite (a cache serving
-stale results, replay timing, χ² bands, roughening). docs/testing.md describes it.
+The list covers the gaps found by breaking the code on purpose (diverged runs kept in the RMSE,
+truth-side sensor errors, common random numbers, the PCRLB check, nonlinear conformance,
+covariances, swept keys; each had no failing test before), classic sigma-point bugs, and bugs of
+the kind that really happen which once passed the whole suite (a cache serving stale results,
+replay timing, χ² bands, roughening). docs/testing.md describes it.
 """
 
 from __future__ import annotations
