@@ -34,7 +34,6 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -45,6 +44,7 @@ from filterpy.monte_carlo import stratified_resample
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
+from measure import best_us, fresh_process_runs
 from quadest.config.paths import config_dir
 from quadest.config.schema import register_schemas
 from quadest.estimators.particle import BootstrapPF, gather_particles
@@ -100,18 +100,6 @@ def on_backend(backend: str, fun: Callable[[], float]) -> float:
             os.environ[square_root.KERNELS_ENV] = before
 
 
-def best_us(fun: Callable[[], object], repeats: int = 20, blocks: int = 5) -> float:
-    """Best mean wall time of ``fun()`` over ``blocks`` blocks of ``repeats`` calls, in µs."""
-    fun()
-    best = float("inf")
-    for _ in range(blocks):
-        start = time.perf_counter()
-        for _ in range(repeats):
-            fun()
-        best = min(best, (time.perf_counter() - start) / repeats * 1e6)
-    return best
-
-
 def kernel_ratios(B: int = 100, N: int = PARTICLES) -> dict[str, dict[str, float]]:
     """Each compiled particle kernel against its numpy reference on the benchmark's sizes: µs per
     call for the batch on each backend and compiled ÷ numpy (the resampling from given uniforms)."""
@@ -148,8 +136,8 @@ def kernel_ratios(B: int = 100, N: int = PARTICLES) -> dict[str, dict[str, float
     rngs = [np.random.default_rng(s) for s in range(B)]
     result = {}
     for name, (compiled, reference) in pairs.items():
-        numba_us = on_backend("numba", lambda f=compiled: best_us(f))
-        numpy_us = on_backend("numpy", lambda f=reference: best_us(f))
+        numba_us = on_backend("numba", lambda f=compiled: best_us(f, repeats=20))
+        numpy_us = on_backend("numpy", lambda f=reference: best_us(f, repeats=20))
         result[name] = {
             "numba_us": round(numba_us, 1),
             "numpy_us": round(numpy_us, 1),
@@ -180,13 +168,7 @@ def compile_times() -> dict[str, float]:
     """The first steps of ``pf`` with each resampling scheme in a fresh process with an empty numba
     cache (the particle kernels and the UNGM f/h compile), then in a second fresh process with that
     cache (they load)."""
-    with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "NUMBA_CACHE_DIR": cache, square_root.KERNELS_ENV: "numba"}
-        runs = [
-            json.loads(subprocess.run([sys.executable, "-c", COMPILE_SCRIPT], env=env, capture_output=True,
-                                      text=True, check=True).stdout)
-            for _ in range(2)
-        ]  # fmt: skip
+    runs = fresh_process_runs(COMPILE_SCRIPT)
     return {"compile_s": round(runs[0]["first_calls_s"], 2), "cached_load_s": round(runs[1]["first_calls_s"], 2)}
 
 

@@ -30,15 +30,14 @@ import os
 import resource
 import subprocess
 import sys
-import tempfile
 import time
-from collections.abc import Callable
 
 import numpy as np
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from numba import get_num_threads, njit, prange
 
+from measure import best_us, fresh_process_runs
 from quadest.config.paths import config_dir
 from quadest.config.schema import register_schemas
 from quadest.estimators.base import PerRunAdapter
@@ -92,18 +91,6 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     return int(out.stdout.strip().splitlines()[-1]) / 1024.0  # ru_maxrss is in KiB on Linux
-
-
-def best_us(fun: Callable[[], object], repeats: int = 50, blocks: int = 5) -> float:
-    """Best mean wall time of ``fun()`` over ``blocks`` blocks of ``repeats`` calls, in µs."""
-    fun()
-    best = float("inf")
-    for _ in range(blocks):
-        start = time.perf_counter()
-        for _ in range(repeats):
-            fun()
-        best = min(best, (time.perf_counter() - start) / repeats * 1e6)
-    return best
 
 
 def kernel_inputs(B: int, n: int = 6, m: int = 6) -> dict[str, tuple]:
@@ -200,13 +187,7 @@ print(json.dumps({"import_s": imported - start, "first_calls_s": time.perf_count
 def compile_times() -> dict[str, float]:
     """First calls of the four kernels in a fresh process with an empty numba cache (they compile),
     then in a second fresh process with that cache (they load), and numba's import time."""
-    with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "NUMBA_CACHE_DIR": cache, square_root.KERNELS_ENV: "numba"}
-        runs = [
-            json.loads(subprocess.run([sys.executable, "-c", COMPILE_SCRIPT], env=env, capture_output=True,
-                                      text=True, check=True).stdout)
-            for _ in range(2)
-        ]  # fmt: skip
+    runs = fresh_process_runs(COMPILE_SCRIPT)
     return {
         "compile_s": round(runs[0]["first_calls_s"], 3),
         "cached_load_s": round(runs[1]["first_calls_s"], 3),
