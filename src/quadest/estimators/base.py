@@ -69,10 +69,11 @@ class _DeclaredParameters:
     (:func:`~quadest.estimators.params.parameter_problem`) whenever an estimator is constructed,
     before its own ``__init__`` runs: every subclass's ``__init__`` is wrapped, and the outermost
     call checks the arguments against the class of the instance being built. A value the pre-run
-    validation refuses is thus refused by a direct construction too, with the same one-line
-    :class:`~quadest.errors.ConfigError`."""
+    validation refuses is thus refused by a direct construction too, with a one-line
+    :class:`~quadest.errors.ConfigError` naming the estimator and the key (``srukf.beta=nan ...``)."""
 
     Params: ClassVar[type | None] = None
+    config_name: ClassVar[str | None] = None
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
@@ -97,7 +98,9 @@ class _DeclaredParameters:
                         values.pop(name)
                 problem = parameter_problem(type(self).Params, values, getattr(model, "n", 0))
                 if problem is not None:
-                    raise ConfigError(*problem)
+                    key, value, allowed = problem
+                    name = type(self).config_name
+                    raise ConfigError(f"{name}.{key}" if name else key, value, allowed)
             init(self, *args, **kw)
 
         cls.__init__ = checked_init
