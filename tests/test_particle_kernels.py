@@ -11,6 +11,10 @@ division through; equality also keeps every checked-in particle-filter result un
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -234,3 +238,21 @@ def test_particle_filters_on_ungm_give_the_same_numbers_on_both_backends(monkeyp
     reference = _ungm_filter(cls)
     numba(monkeypatch)
     np.testing.assert_array_equal(_ungm_filter(cls), reference)
+
+
+def test_constructing_a_particle_filter_loads_every_particle_kernel_before_any_timed_call():
+    """The runner times ``initialize`` and every step, so the kernels (and numba's typed list of
+    generators) must be loaded when the filter is built; checked in a fresh process, where no
+    earlier test has loaded them."""
+    script = (
+        "from quadest.estimators.particle import BootstrapPF\n"
+        "from quadest.models.validation import UNGMModel\n"
+        "from quadest.numerics import particle_kernels as k\n"
+        "BootstrapPF(UNGMModel(1.0, 1.0, 1.0, 2), particles=8)\n"
+        "names = ['standard_normal_kernel', 'resample_kernel', 'gather_kernel', "
+        "'gaussian_logpdf_diagonal_kernel', 'shift_log_weights_kernel', 'normalise_kernel']\n"
+        "print(sorted(n for n in names if not getattr(k, n).signatures))\n"
+    )
+    env = {**os.environ, "QUADEST_KERNELS": "numba"}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, env=env)
+    assert out.stdout.strip() == "[]", out.stdout

@@ -137,14 +137,21 @@ def quadrotor_io(data):
     return u, data.measurements
 
 
-@pytest.mark.parametrize(("alpha", "beta", "kappa"), GRID)
-def test_srukf_equals_filterpy_ukf_on_quadrotor(quadrotor_data, alpha, beta, kappa):
-    data = quadrotor_data
+def quadrotor_case(data, alpha: float, beta: float, kappa):
+    """``(kappa, u, z, P0, tol_x, tol_P)`` of one grid cell on the quadrotor data (``"zero"`` or
+    the 3 − n heuristic for κ)."""
     n = data.model.n
     kappa = 0.0 if kappa == "zero" else 3.0 - n
     u, z = quadrotor_io(data)
     P0 = np.broadcast_to(data.P0, (data.x0.shape[0], n, n))
-    tol_x, tol_P = tolerances(data.model, data.x0, P0, u, z, alpha, beta, kappa)
+    return (kappa, u, z, P0, *tolerances(data.model, data.x0, P0, u, z, alpha, beta, kappa))
+
+
+@pytest.mark.parametrize(("alpha", "beta", "kappa"), GRID)
+def test_srukf_equals_filterpy_ukf_on_quadrotor(quadrotor_data, alpha, beta, kappa):
+    data = quadrotor_data
+    n = data.model.n
+    kappa, u, z, P0, tol_x, tol_P = quadrotor_case(data, alpha, beta, kappa)
     if alpha >= 0.5:
         assert tol_x == tol_P == 1e-9
     compared = 0
@@ -176,11 +183,7 @@ def test_fused_srukf_steps_equal_the_sigma_point_family_on_quadrotor(quadrotor_d
     moments = unscented.unscented_moments
     monkeypatch.setattr(srukf_module, "unscented_moments", lambda *a: calls.append(1) or moments(*a))
     data = quadrotor_data
-    n = data.model.n
-    kappa = 0.0 if kappa == "zero" else 3.0 - n
-    u, z = quadrotor_io(data)
-    P0 = np.broadcast_to(data.P0, (data.x0.shape[0], n, n))
-    tol_x, tol_P = tolerances(data.model, data.x0, P0, u, z, alpha, beta, kappa)
+    kappa, u, z, P0, tol_x, tol_P = quadrotor_case(data, alpha, beta, kappa)
     fused_fail, family_fail = {}, {}
     fused = run_filter(SRUKF(data.model, alpha, beta, kappa), data.model, data.x0, P0, u, z, fused_fail)
     assert len(calls) == 2 * (u.shape[1] - 1)

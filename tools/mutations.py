@@ -387,6 +387,13 @@ MUTATIONS = (
         ("tests/test_plugins.py::test_bad_parameters_are_refused_at_construction_with_a_message_naming_them"
          "[hf-huber_threshold=0.0]",),
     ),
+    Mutation(
+        "particle kernels loaded in the first timed call instead of at construction",
+        "src/quadest/estimators/particle.py",
+        "        warm_up_particle_kernels()\n",
+        "",
+        (PARTICLE_KERNELS + "test_constructing_a_particle_filter_loads_every_particle_kernel_before_any_timed_call",),
+    ),
 )  # fmt: skip
 
 

@@ -61,7 +61,7 @@ from quadest.estimators.base import Estimator
 from quadest.estimators.params import parameter_problem, ranged
 from quadest.models.base import FilterModel
 from quadest.numerics import psd_sqrt
-from quadest.numerics.draws import particle_kernels, standard_normals
+from quadest.numerics.draws import particle_kernels, standard_normals, warm_up_particle_kernels
 from quadest.numerics.resampling import (
     RESAMPLING_SCHEMES,
     check_scheme,
@@ -223,6 +223,7 @@ class ParticleFilter(Estimator):
             raise ConfigError(
                 "model", model.name, "a model with vector states and one measurement (particle filters take no sensors)"
             )
+        warm_up_particle_kernels()
         self.N = int(particles)
         self._log_uniform = np.log(np.full(1, 1.0 / self.N))[0]  # log(1/N) as np.log(w) gives it
         self.resampling, self.schedule, self.ess_threshold = resampling, schedule, float(ess_threshold)

@@ -9,8 +9,8 @@ W0 downdate (eqs 5.19, 5.24) is the unscented rule's (:class:`~quadest.numerics.
 2007; :mod:`quadest.numerics.huber`).
 
 On the compiled backend (``QUADEST_KERNELS=numba``) the plain SR-UKF (not augmented, not robust,
-the primary measurement) of a model with compiled ``f``/``h`` (one that has ``warm_up_kernels``,
-like the thesis quadrotor) and a vector state takes each step in three fused calls per stage
+the primary measurement) of a model that declares ``fused_unscented`` (compiled ``f``/``h`` for
+sigma points, like the thesis quadrotor) and a vector state takes each step in three fused calls per stage
 (:mod:`quadest.numerics.unscented`: points, moments, correction) around the model's ``f`` and
 ``h``. Every other case, and the ``numpy`` backend, takes the sigma-point family's path
 (:class:`~quadest.estimators.sigma_point.SquareRootSigmaPointFilter`), bit for bit; the fused path
@@ -84,7 +84,7 @@ class SRUKF(SquareRootSigmaPointFilter):
         return (
             not self.augmented
             and self.huber is None
-            and hasattr(self.model, "warm_up_kernels")
+            and self.model.fused_unscented
             and not self.model.has_manifold_state
             and kernel_backend() == "numba"
         )

@@ -89,6 +89,7 @@ class FilterModel(ABC):
     batch_size: int = 1
     fd_step: float = 1e-6
     supports_augmented: bool = True
+    fused_unscented: bool = False  # f and h compiled for sigma points: the SR-UKF may take its fused steps
     sensors: Mapping[str, MeasurementModel] = MappingProxyType({})
 
     @abstractmethod

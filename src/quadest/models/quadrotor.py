@@ -94,6 +94,8 @@ class QuadrotorFilterModel(FilterModel):
         accel_errors, gyro_errors: deterministic sensor errors the filter assumes, per run.
     """
 
+    fused_unscented = True
+
     def __init__(
         self,
         params: QuadrotorParams,

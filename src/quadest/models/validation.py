@@ -84,6 +84,12 @@ class UNGMModel(FilterModel):
             return None
         return _kernels()
 
+    def warm_up_kernels(self) -> None:
+        """Load the compiled ``f``/``h`` now (see :func:`quadest.numerics.square_root.warm_up`)."""
+        x, u = np.zeros((1, 1, 1)), np.zeros((1, 1))
+        self.f(x, u)
+        self.h(x, u)
+
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The UNGM transition: compiled for real points, else :meth:`f_numpy`."""
         kernels = self._compiled(x)
