@@ -15,6 +15,7 @@ keeps the nominal state ``x`` (B, n) on the model's manifold and the covariance 
   ``G_θ = J_r(δθ̂) ≈ I − [δθ̂/2]×``). Markley 2003 drops this term (``G = I``), which is
   second order in the correction; ``reset_jacobian: false`` gives that filter.
 
+The linearised steps are the shared Gaussian steps (:mod:`quadest.estimators.gaussian_steps`).
 Everything goes through the model (``f``, ``boxplus``, ``F_err``, ``H_err``, ``Q``,
 ``measurement(sensor)``), so any model with ``n_err``/``boxplus``/``boxminus`` runs unchanged; on
 vector-state models ``F_err = F``, ``H_err = H``, ``G = I`` and the filter is the EKF (on a
@@ -29,9 +30,16 @@ from typing import ClassVar
 import numpy as np
 
 from quadest.estimators.base import Estimator
+from quadest.estimators.gaussian_steps import (
+    MeasurementMoments,
+    joseph_covariance,
+    kalman_correction,
+    linearized_covariance,
+    linearized_moments,
+    symmetric,
+)
 from quadest.models.base import FilterModel
-from quadest.numerics import batched_cholesky, kalman_gain, psd_sqrt
-from quadest.numerics.joseph import joseph_covariance
+from quadest.numerics import batched_cholesky, psd_sqrt
 
 
 def _t(a: np.ndarray) -> np.ndarray:
@@ -50,7 +58,9 @@ class BatchedEKFBase(Estimator):
     """What the batched linearized filters (``mekf`` here, ``hf`` in
     :mod:`~quadest.estimators.extended`) share: the nominal state ``x`` (B, n), the error covariance
     ``P`` (B, n_err, n_err), the last innovation and the lower factor of its covariance, the
-    quarantine copies, and a Cholesky factor that flags the runs where it fails."""
+    quarantine copies, a Cholesky factor that flags the runs where it fails, and the linearised
+    steps (:mod:`~quadest.estimators.gaussian_steps`): the time update and a measurement's
+    moments."""
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
 
@@ -73,6 +83,23 @@ class BatchedEKFBase(Estimator):
             self.flag(np.flatnonzero(bad), f"{what} not positive definite")
             L[bad] = np.eye(A.shape[-1])
         return L
+
+    def _linearized_predict(self, u: np.ndarray) -> None:
+        """``x ← f(x, u)``, ``P ← F P Fᵀ + Q`` with ``F = model.F_err`` at the posterior mean."""
+        F = self.model.F_err(self.x, u)
+        self.x = self.model.f(self.x[:, None, :], u)[:, 0]
+        self.P = linearized_covariance(F, self.P, self.model.Q)
+
+    def _linearized_measurement(
+        self, z: np.ndarray, u: np.ndarray, sensor: str | None
+    ) -> tuple[np.ndarray, np.ndarray, MeasurementMoments]:
+        """``H = model.H_err`` at the prior mean and the measurement's moments; stores the
+        innovation. Returns ``(H, R, moments)``."""
+        meas = self.model.measurement(sensor)
+        H = self.model.H_err(self.x, u, sensor)
+        moments = linearized_moments(meas.h(self.x[:, None, :], u)[:, 0], H, self.P, meas.R)
+        self._nu = z - moments.mean
+        return H, meas.R, moments
 
     @property
     def mean(self) -> np.ndarray:
@@ -103,27 +130,20 @@ class ErrorStateEKF(BatchedEKFBase):
         self._start(x0, np.array(P0, dtype=float, copy=True), self._sqrt_R)
 
     def predict(self, u: np.ndarray) -> None:
-        F = self.model.F_err(self.x, u)
-        self.x = self.model.f(self.x[:, None, :], u)[:, 0]
-        P = F @ self.P @ _t(F) + self.model.Q
-        self.P = 0.5 * (P + _t(P))
+        self._linearized_predict(u)
+        self.P = symmetric(self.P)
         self.quarantine(self.x, self.P, self._x_safe, self._P_safe)
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
-        meas = self.model.measurement(sensor)
-        H = self.model.H_err(self.x, u, sensor)
-        y = meas.h(self.x[:, None, :], u)[:, 0]
-        PHt = self.P @ _t(H)
-        S = H @ PHt + meas.R
-        Sy = self._cholesky(0.5 * (S + _t(S)), "innovation covariance")
-        K = kalman_gain(PHt, Sy)
-        self._nu, self._Sy = z - y, Sy
-        dx = (K @ self._nu[..., None])[..., 0]
-        P = joseph_covariance(self.P, H, meas.R, K)
+        H, R, moments = self._linearized_measurement(z, u, sensor)
+        self._Sy = self._cholesky(symmetric(moments.cov), "innovation covariance")
+        conditioned = kalman_correction(self._nu, moments.cross, self._Sy)
+        K, dx = conditioned.gain, conditioned.correction
+        P = joseph_covariance(self.P, H, R, K)
         x_prior = self.x
         self.x = self.model.boxplus(x_prior, dx)
         if self.reset_jacobian:
             G = self.model.reset_jacobian(x_prior, dx)
             P = G @ P @ _t(G)
-        self.P = 0.5 * (P + _t(P))
+        self.P = symmetric(P)
         self.quarantine(self.x, self.P, self._x_safe, self._P_safe)

@@ -18,11 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadest.estimators.error_state_ekf import BatchedEKFBase
+from quadest.estimators.gaussian_steps import joseph_covariance, kalman_correction
 from quadest.estimators.robust_params import DEFAULT, HuberParams, huber_settings
 from quadest.models.base import FilterModel
-from quadest.numerics import kalman_gain
-from quadest.numerics.huber import HuberCounts, huber_update
-from quadest.numerics.joseph import joseph_covariance
+from quadest.numerics.huber import HuberCounts
 
 
 def _t(a: np.ndarray) -> np.ndarray:
@@ -59,23 +58,20 @@ class HuberEKF(BatchedEKFBase):
         self._counts = HuberCounts(B)
 
     def predict(self, u: np.ndarray) -> None:
-        F = self.model.F_err(self.x, u)
-        self.x = self.model.f(self.x[:, None], u)[:, 0]
-        self.P = F @ self.P @ _t(F) + self.model.Q
+        self._linearized_predict(u)
         self.quarantine(self.x, self.P, self._x_safe, self._P_safe)
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
-        meas = self.model.measurement(sensor)
-        H = self.model.H_err(self.x, u, sensor)
-        self._nu = z - meas.h(self.x[:, None], u)[:, 0]
-        Pxy = self.P @ _t(H)
-        self._Sy = self._cholesky(H @ Pxy + meas.R, "innovation covariance")
-        K = kalman_gain(Pxy, self._Sy)
-        step = huber_update(
-            self._nu, Pxy, self._Sy, self._cholesky(self.P, "covariance"), (K @ self._nu[..., None])[..., 0], self.huber
+        H, R, moments = self._linearized_measurement(z, u, sensor)
+        # Pyy factored as computed (Cholesky reads its lower triangle), not symmetrised as mekf's
+        # is: these are the digits the checked-in Huber results were made with
+        self._Sy = self._cholesky(moments.cov, "innovation covariance")
+        conditioned = kalman_correction(
+            self._nu, moments.cross, self._Sy, self.huber, self._cholesky(self.P, "covariance")
         )
+        step = conditioned.huber
         self.x = self.model.boxplus(self.x, step.correction)
-        self.P = joseph_covariance(self.P, H, meas.R, K)
+        self.P = joseph_covariance(self.P, H, R, conditioned.gain)
         self.P[step.robust] = step.factor[step.robust] @ _t(step.factor[step.robust])
         self._counts.add(step, self._nu.shape[-1])
         self.quarantine(self.x, self.P, self._x_safe, self._P_safe)

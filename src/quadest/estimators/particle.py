@@ -58,7 +58,7 @@ import numpy as np
 
 from quadest.errors import ConfigError
 from quadest.estimators.base import Estimator
-from quadest.estimators.params import parameter_problem, ranged
+from quadest.estimators.params import ranged
 from quadest.models.base import FilterModel
 from quadest.numerics import psd_sqrt
 from quadest.numerics.draws import particle_kernels, standard_normals, warm_up_particle_kernels
@@ -137,13 +137,6 @@ def one_of(key: str, value: str, allowed: tuple[str, ...]) -> None:
         raise ConfigError(key, value, f"one of {list(allowed)}")
 
 
-def check_ranges(params_cls: type, values: dict, n: int) -> None:
-    """Raise :class:`ConfigError` for the first of ``values`` outside its ``Params`` range."""
-    problem = parameter_problem(params_cls, values, n)
-    if problem is not None:
-        raise ConfigError(*problem)
-
-
 def gather_particles(arrays: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """``arrays`` (B, N, ...) picked along the particle axis by ``indices`` (B, N')."""
     B, N = arrays.shape[:2]
@@ -203,14 +196,6 @@ class ParticleFilter(Estimator):
         vanished_weights: str = "flag",
     ) -> None:
         super().__init__(model)
-        check_ranges(
-            ParticleParams,
-            {
-                "particles": particles, "ess_threshold": ess_threshold, "roughening": roughening,
-                "weight_floor": weight_floor,
-            },
-            model.n,
-        )  # fmt: skip
         check_scheme(resampling)
         one_of("schedule", schedule, SCHEDULES)
         one_of("estimate", estimate, ESTIMATES)

@@ -11,7 +11,9 @@ particles, so ``|P̂_i|`` does not cancel).
 The proposal EKF may use its own noise covariances (``proposal_Q``, ``proposal_R``: variances
 q, r, covariances ``q I`` and ``r I``; default the model's ``Q`` and ``R``), as the paper does on
 its benchmark. Jacobians come per particle from ``model.F_points`` and ``model.H_points``; the
-covariance update is Joseph's form so ``P̂_i`` stays symmetric positive semi-definite.
+step is the linearised Gaussian predict and update of the EKF (:mod:`~quadest.estimators.gaussian_steps`,
+gain by triangular solves) for every particle of every run at once, and the covariance update is
+Joseph's form so ``P̂_i`` stays symmetric positive semi-definite.
 
 On a linear-Gaussian model with ``P_i = 0`` before the step, this proposal is the optimal one,
 ``p(x_k | x_{k−1}, y_k)``, and every particle's incremental weight equals the predictive likelihood
@@ -25,6 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadest.errors import ConfigError
+from quadest.estimators.gaussian_steps import (
+    joseph_covariance,
+    kalman_correction,
+    linearized_covariance,
+    linearized_moments,
+    symmetric,
+)
 from quadest.estimators.particle import ParticleFilter, ParticleParams
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky
@@ -47,10 +56,6 @@ def _noise_covariance(key: str, variance: float | None, default: np.ndarray) -> 
     if isinstance(variance, bool) or not isinstance(variance, int | float) or not variance > 0:
         raise ConfigError(key, variance, "a variance > 0 (the covariance is variance * I), or null for the model's")
     return float(variance) * np.eye(default.shape[0])
-
-
-def _swap(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
 
 
 class EKPF(ParticleFilter):
@@ -85,12 +90,8 @@ class EKPF(ParticleFilter):
         """``x_i ~ N(μ_i, P̂_i)`` from :meth:`proposal_moments`; returns ``log N(x_i; μ_i, P̂_i)``
         and keeps ``P̂_i`` as the particle's covariance."""
         mu, P_new = self.proposal_moments(u_prev, z, u)
-        B, N, n = mu.shape
-        L, not_pd = batched_cholesky(P_new.reshape(B * N, n, n))
-        bad_runs = np.flatnonzero(not_pd.reshape(B, N).any(axis=1))
-        if bad_runs.size:
-            self.flag(bad_runs, f"proposal covariance not positive definite at step {self.step}")
-        L = L.reshape(B, N, n, n)
+        N, n = mu.shape[1:]
+        L = self._particle_factors(P_new, "proposal covariance")
         eps = standard_normals(self.rngs, (N, n))
         x_new = mu + (L @ eps[..., None])[..., 0]
         log_det = np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
@@ -98,16 +99,24 @@ class EKPF(ParticleFilter):
         self.particle_state["P"] = P_new
         return x_new, log_q
 
+    def _particle_factors(self, P: np.ndarray, what: str) -> np.ndarray:
+        """Lower factors (B, N, k, k) of the particles' matrices ``P`` (B, N, k, k); a run with one
+        that is not positive definite is flagged (its factor is NaN there)."""
+        B, N, k, _ = P.shape
+        L, not_pd = batched_cholesky(P.reshape(B * N, k, k))
+        bad_runs = np.flatnonzero(not_pd.reshape(B, N).any(axis=1))
+        if bad_runs.size:
+            self.flag(bad_runs, f"{what} not positive definite at step {self.step}")
+        return L.reshape(B, N, k, k)
+
     def proposal_moments(self, u_prev: np.ndarray, z: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One EKF step from every ``(x_i, P_i)`` with ``y_k``: ``(μ_i, P̂_i)``, (B, N, n) and (B, N, n, n)."""
         model, x, P = self.model, self.x, self.particle_state["P"]
-        F = model.F_points(x, u_prev)
         x_pred = model.f(x, u_prev)
-        P_pred = F @ P @ _swap(F) + self.Q_proposal
+        P_pred = linearized_covariance(model.F_points(x, u_prev), P, self.Q_proposal)
         H = model.H_points(x_pred, u)
-        S = H @ P_pred @ _swap(H) + self.R_proposal
-        gain = _swap(np.linalg.solve(S, H @ P_pred))  # P Hᵀ S⁻¹ (S and P symmetric)
-        mu = x_pred + (gain @ (z[:, None, :] - model.h(x_pred, u))[..., None])[..., 0]
-        I_KH = np.eye(x.shape[-1]) - gain @ H
-        P_new = I_KH @ P_pred @ _swap(I_KH) + gain @ self.R_proposal @ _swap(gain)
-        return mu, 0.5 * (P_new + _swap(P_new))
+        moments = linearized_moments(model.h(x_pred, u), H, P_pred, self.R_proposal)
+        Sy = self._particle_factors(symmetric(moments.cov), "proposal innovation covariance")
+        conditioned = kalman_correction(z[:, None, :] - moments.mean, moments.cross, Sy)
+        P_new = joseph_covariance(P_pred, H, self.R_proposal, conditioned.gain)
+        return x_pred + conditioned.correction, symmetric(P_new)

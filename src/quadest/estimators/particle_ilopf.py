@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from quadest.estimators.params import ranged
-from quadest.estimators.particle import check_ranges, gather_particles, one_of, particle_constraints
+from quadest.estimators.particle import gather_particles, one_of, particle_constraints
 from quadest.estimators.particle_ekpf import EKPF, EKPFParams
 from quadest.models.base import FilterModel
 from quadest.numerics.resampling import resample
@@ -84,7 +84,6 @@ class ILOPF(EKPF):
         **options,
     ) -> None:
         super().__init__(model, resampling=resampling, **options)
-        check_ranges(ILOPFParams, {"threshold": threshold, "coefficient_scale": coefficient_scale}, model.n)
         one_of("coefficient", coefficient, COEFFICIENT_LAWS)
         self.threshold, self.coefficient = float(threshold), coefficient
         self.coefficient_scale = float(coefficient_scale)

@@ -10,7 +10,9 @@ With ``augmented: true`` (the paper's choice; van der Merwe 2004) the proposal's
 joins the sigma-point state ``[x; v; n]`` with covariance ``diag(P_i, Q_p, R_p)`` and goes through
 the model's ``f_noise`` and ``h_noise``; otherwise ``Q_p`` and ``R_p`` are added to the
 transformed covariances. The points and weights are the sigma-point family's
-:class:`~quadest.numerics.rules.UnscentedRule`, for all particles of all runs in one model call.
+:class:`~quadest.numerics.rules.UnscentedRule`, for all particles of all runs in one model call,
+and the step is the family's Gaussian predict and update (:mod:`~quadest.estimators.gaussian_steps`:
+points, weighted means, moments, gain by triangular solves, ``P − K Pyy Kᵀ``).
 """
 
 from __future__ import annotations
@@ -20,12 +22,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadest.errors import ConfigError
+from quadest.estimators.gaussian_steps import (
+    covariance_posterior,
+    kalman_correction,
+    point_mean,
+    sigma_point_covariance,
+    sigma_point_moments,
+    sigma_points,
+)
 from quadest.estimators.params import ranged
-from quadest.estimators.particle import check_ranges
 from quadest.estimators.particle_ekpf import EKPF, EKPFParams
 from quadest.models.base import FilterModel
-from quadest.numerics import batched_cholesky
-from quadest.numerics.rules import UnscentedRule, rule_mean
+from quadest.numerics.rules import UnscentedRule
 
 
 @dataclass
@@ -39,8 +47,11 @@ class UPFParams(EKPFParams):
     augmented: bool = True
 
 
-def _swap(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
+def _flat(X: np.ndarray) -> np.ndarray:
+    """The points (B, N, L, d) of every particle as one batch of points per run (B, N·L, d), the
+    shape the model's functions take."""
+    B, N, L, d = X.shape
+    return X.reshape(B, N * L, d)
 
 
 class UPF(EKPF):
@@ -72,21 +83,10 @@ class UPF(EKPF):
         self.augmented = bool(augmented)
         self.q, self.r = (model.process_noise_dim, model.measurement_noise_dim) if self.augmented else (0, 0)
         na = model.n + self.q + self.r
-        check_ranges(UPFParams, {"alpha": alpha, "beta": beta, "kappa": kappa}, model.n)
         if not na + kappa > 0:
             raise ConfigError("kappa", kappa, f"a number > {-na} (n + κ > 0 for the sigma-point dimension {na})")
         self.rule = UnscentedRule(float(alpha), float(beta), float(kappa))
         self._noise_factor = (np.linalg.cholesky(self.Q_proposal), np.linalg.cholesky(self.R_proposal))
-
-    def _factor(self, P: np.ndarray) -> np.ndarray:
-        """Lower factors (B, N, n, n) of the particles' covariances; a run with one that is not
-        positive definite is flagged."""
-        B, N, n, _ = P.shape
-        L, not_pd = batched_cholesky(P.reshape(B * N, n, n))
-        bad_runs = np.flatnonzero(not_pd.reshape(B, N).any(axis=1))
-        if bad_runs.size:
-            self.flag(bad_runs, f"particle covariance not positive definite at step {self.step}")
-        return L.reshape(B, N, n, n)
 
     def _augment(self, L: np.ndarray) -> np.ndarray:
         """``diag(L_i, √Q_p, √R_p)`` (B, N, n + q + r, n + q + r)."""
@@ -98,15 +98,6 @@ class UPF(EKPF):
         S[..., n + self.q :, n + self.q :] = self._noise_factor[1]
         return S
 
-    def _points(self, mean: np.ndarray, S: np.ndarray) -> np.ndarray:
-        """Sigma points (B, N·L, d) of every particle: ``[mean; 0; 0]`` plus the rule's offsets of ``S``."""
-        B, N, n = mean.shape
-        offsets = self.rule.offsets(S)
-        L, d = offsets.shape[-2:]
-        X = offsets.reshape(B, N * L, d)
-        X[..., :n] += np.repeat(mean, L, axis=1)
-        return X
-
     def proposal_moments(self, u_prev: np.ndarray, z: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One UKF step from every ``(x_i, P_i)`` with ``y_k``: ``(μ_i, P̂_i)``. Augmented: the
         points drawn once carry the noise through ``f_noise`` and ``h_noise``; otherwise new
@@ -115,23 +106,23 @@ class UPF(EKPF):
         B, N, n = x.shape
         na = n + self.q + self.r
         wm = self.rule.mean_weights(na)
-        L = self._factor(self.particle_state["P"])
+        L = self._particle_factors(self.particle_state["P"], "particle covariance")
         if self.augmented:
-            X = self._points(x, self._augment(L))
+            X = _flat(sigma_points(self.rule, x, self._augment(L)))
             Xx = model.f_noise(X[..., :n], X[..., n : n + self.q], u_prev)
             Y = model.h_noise(Xx, X[..., n + self.q :], u)
+            R = None
         else:
-            Xf = model.f(self._points(x, L), u_prev).reshape(B, N, -1, n)
-            x_pred = rule_mean(Xf, wm)
-            P_pred = self.rule.covariance(Xf - x_pred[..., None, :], na) + self.Q_proposal
-            Xx = self._points(x_pred, self._factor(P_pred))
+            Xf = model.f(_flat(sigma_points(self.rule, x, L)), u_prev).reshape(B, N, -1, n)
+            x_pred, D = point_mean(Xf, wm)
+            P_pred = sigma_point_covariance(self.rule, D, na, self.Q_proposal)
+            Xx = _flat(sigma_points(self.rule, x_pred, self._particle_factors(P_pred, "particle covariance")))
             Y = model.h(Xx, u)
+            R = self.R_proposal
         Xx, Y = Xx.reshape(B, N, -1, n), Y.reshape(B, N, Xx.shape[1] // N, -1)
-        x_pred, y_pred = rule_mean(Xx, wm), rule_mean(Y, wm)
-        DX, DY = Xx - x_pred[..., None, :], Y - y_pred[..., None, :]
-        P_pred = self.rule.covariance(DX, na)
-        Pyy = self.rule.covariance(DY, na) + (0.0 if self.augmented else self.R_proposal)
-        gain = _swap(np.linalg.solve(Pyy, _swap(self.rule.cross_covariance(DX, DY, na))))
-        mu = x_pred + (gain @ (z[:, None, :] - y_pred)[..., None])[..., 0]
-        P_new = P_pred - gain @ Pyy @ _swap(gain)
-        return mu, 0.5 * (P_new + _swap(P_new))
+        (x_pred, DX), (y_pred, DY) = point_mean(Xx, wm), point_mean(Y, wm)
+        moments = sigma_point_moments(self.rule, DX, DY, na, y_pred, R)
+        Sy = self._particle_factors(moments.cov, "proposal innovation covariance")
+        conditioned = kalman_correction(z[:, None, :] - y_pred, moments.cross, Sy)
+        P_pred = sigma_point_covariance(self.rule, DX, na)
+        return x_pred + conditioned.correction, covariance_posterior(P_pred, conditioned.gain, moments.cov)

@@ -18,6 +18,9 @@ second update in the same step (another sensor) draws ``[x; v]`` afresh.
 States that are not vectors: points are ``x ⊞ offset`` and deviations ``Y ⊟ ȳ`` with the model's
 ``boxplus``/``boxminus``; the mean is ``Y0 ⊞ Σ wm_i (Y_i ⊟ Y0)``.
 
+The points, means, covariance-form moments, gain and correction are the shared Gaussian steps
+(:mod:`quadest.estimators.gaussian_steps`); the square-root form keeps the same moments as factors.
+
 The step from the moments (``ν``, ``Pxy``, ``Pyy``) to the posterior is one hook,
 :meth:`SigmaPointFilter._measurement_update`: the Kalman update, or with ``huber`` settings the
 Huber M-estimation update (Karlgaard & Schaub 2007; :mod:`quadest.numerics.huber`) for the runs
@@ -34,10 +37,17 @@ import numpy as np
 
 from quadest.errors import DowndateError
 from quadest.estimators.base import Estimator
+from quadest.estimators.gaussian_steps import (
+    covariance_posterior,
+    kalman_correction,
+    point_mean,
+    sigma_point_covariance,
+    sigma_points,
+)
 from quadest.models.base import FilterModel
-from quadest.numerics import batched_cholesky, cholupdate, kalman_gain, psd_sqrt, qr_factor
-from quadest.numerics.huber import HuberCounts, HuberSettings, huber_update
-from quadest.numerics.rules import IntegrationRule, rule_mean
+from quadest.numerics import batched_cholesky, cholupdate, psd_sqrt, qr_factor
+from quadest.numerics.huber import HuberCounts, HuberSettings
+from quadest.numerics.rules import IntegrationRule
 
 
 def _t(a: np.ndarray) -> np.ndarray:
@@ -136,20 +146,14 @@ class SigmaPointFilter(Estimator):
         S = self._factor()
         if noise_factors:
             S = _block_diagonal([S, *(self._broadcast(F) for F in noise_factors)])
-        off = self.rule.offsets(S)
-        n = self.model.n_err
-        X = self.model.boxplus(self.x[:, None, :], off[..., :n])
-        return np.concatenate([X, off[..., n:]], axis=-1)
+        return sigma_points(self.rule, self.x, S, self.model.boxplus)
 
     def _mean(self, Y: np.ndarray, dim: int, state: bool) -> tuple[np.ndarray, np.ndarray]:
         """Weighted mean and deviations of points ``Y`` (B, L, ·) (eqs 5.8, 5.17, 5.22)."""
         wm = self.rule.mean_weights(dim)
         if not state:
-            mean = rule_mean(Y, wm)
-            return mean, Y - mean[..., None, :]
-        Y0 = Y[..., :1, :]
-        mean = self.model.boxplus(Y0, (wm[1:] @ self.model.boxminus(Y[..., 1:, :], Y0))[..., None, :])[..., 0, :]
-        return mean, self.model.boxminus(Y, mean[..., None, :])
+            return point_mean(Y, wm)
+        return point_mean(Y, wm, self.model.boxplus, self.model.boxminus)
 
     def predict(self, u: np.ndarray) -> None:
         """Time update (eqs 5.15–5.19)."""
@@ -205,14 +209,11 @@ class SigmaPointFilter(Estimator):
         """From the moments to the posterior: gain (5.26), mean (5.27) and spread (5.28)–(5.29);
         with ``huber`` settings, the runs with an outlying whitened residual take the Huber
         M-estimate and its covariance instead (:func:`~quadest.numerics.huber.huber_update`)."""
-        K = kalman_gain(Pxy, self._Sy)  # (5.26)
-        correction = (K @ self._nu[..., None])[..., 0]
-        step = None
-        if self.huber is not None:
-            step = huber_update(self._nu, Pxy, self._Sy, self._factor(), correction, self.huber)
-            correction = step.correction
-        self.x = self.model.boxplus(self.x, correction)  # (5.27)
-        self._posterior(K, spread_y, DX, DY, dim, sqrt_R)  # (5.28)–(5.29)
+        prior_factor = None if self.huber is None else self._factor()
+        conditioned = kalman_correction(self._nu, Pxy, self._Sy, self.huber, prior_factor)  # (5.26)
+        self.x = self.model.boxplus(self.x, conditioned.correction)  # (5.27)
+        self._posterior(conditioned.gain, spread_y, DX, DY, dim, sqrt_R)  # (5.28)–(5.29)
+        step = conditioned.huber
         if step is not None:
             if step.robust.any():
                 self._set_factor(np.flatnonzero(step.robust), step.factor[step.robust])
@@ -252,10 +253,7 @@ class SigmaPointKalmanFilter(SigmaPointFilter):
         return S
 
     def _spread(self, D: np.ndarray, dim: int, sqrt_noise: np.ndarray | None) -> np.ndarray:
-        P = self.rule.covariance(D, dim)
-        if sqrt_noise is not None:
-            P = P + sqrt_noise @ sqrt_noise.T
-        return 0.5 * (P + _t(P))
+        return sigma_point_covariance(self.rule, D, dim, None if sqrt_noise is None else sqrt_noise @ sqrt_noise.T)
 
     def _innovation_factor(self, Pyy: np.ndarray) -> np.ndarray:
         Sy, bad = batched_cholesky(Pyy)
@@ -267,8 +265,7 @@ class SigmaPointKalmanFilter(SigmaPointFilter):
         return Sy
 
     def _posterior(self, K, Pyy, DX, DY, dim: int, sqrt_R: np.ndarray | None) -> None:
-        P = self.P - K @ Pyy @ _t(K)
-        self.P = 0.5 * (P + _t(P))
+        self.P = covariance_posterior(self.P, K, Pyy)
 
     def _set_factor(self, runs: np.ndarray, factor: np.ndarray) -> None:
         self.P[runs] = factor @ _t(factor)
