@@ -20,6 +20,13 @@ Optional capabilities are declared in ``capabilities``, never guessed:
   and left out of the NEES averages; the run is not taken for diverged.
 - ``"no_covariance"``: the filter has no covariance of the error state (a complementary filter);
   its ``covariance`` is NaN, its NEES unavailable, and neither makes the run diverged.
+- ``"smoothing"``: with :attr:`Estimator.smoothing` set before ``initialize``, every ``predict``
+  leaves the smoother's step of its transition in ``smoother_step``
+  (:class:`~quadest.estimators.smoothing.SmootherStep`) and ``smoothing_form()`` says how the
+  steps combine (:mod:`quadest.estimators.smoothing`: fixed interval and fixed lag).
+- ``"particle_smoothing"``: with :attr:`Estimator.smoothing` set, every ``update`` leaves its
+  weighted cloud before resampling in ``smoother_cloud``
+  (:class:`~quadest.estimators.particle_smoothing.ParticleCloud`) for the backward simulation.
 
 An estimator may also report per-run diagnostics at the end of a run (:meth:`Estimator.diagnostics`:
 effective sample size, resampling counts, ...); they become columns of ``metrics.csv``.
@@ -43,7 +50,9 @@ from quadest.estimators.params import parameter_problem
 from quadest.models.base import FilterModel
 from quadest.numerics.square_root import warm_up
 
-CAPABILITIES = frozenset({"innovation", "sqrt_covariance", "random", "cloud", "no_covariance"})
+CAPABILITIES = frozenset(
+    {"innovation", "sqrt_covariance", "random", "cloud", "no_covariance", "smoothing", "particle_smoothing"}
+)
 
 
 class _FailureLog:
@@ -118,6 +127,7 @@ class Estimator(_DeclaredParameters, _FailureLog, ABC):
     capabilities: ClassVar[frozenset[str]] = frozenset()
     config_name: ClassVar[str | None] = None
     Params: ClassVar[type | None] = None
+    smoothing: bool = False  # record the smoother's steps (capability "smoothing")
 
     def __init__(self, model: FilterModel) -> None:
         self.model = model

@@ -38,6 +38,7 @@ from quadest.estimators.gaussian_steps import (
     linearized_moments,
     symmetric,
 )
+from quadest.estimators.smoothing import SmoothingForm, linearized_smoother_step
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, psd_sqrt
 
@@ -62,7 +63,8 @@ class BatchedEKFBase(Estimator):
     steps (:mod:`~quadest.estimators.gaussian_steps`): the time update and a measurement's
     moments."""
 
-    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "smoothing"})
+    reset_covariance: bool = False
 
     def _start(self, x0: np.ndarray, P0: np.ndarray, sqrt_R: np.ndarray) -> None:
         """Start every run at ``x0`` (B, n) with covariance ``P0`` (B, n_err, n_err, owned by the
@@ -85,10 +87,23 @@ class BatchedEKFBase(Estimator):
         return L
 
     def _linearized_predict(self, u: np.ndarray) -> None:
-        """``x ← f(x, u)``, ``P ← F P Fᵀ + Q`` with ``F = model.F_err`` at the posterior mean."""
+        """``x ← f(x, u)``, ``P ← F P Fᵀ + Q`` with ``F = model.F_err`` at the posterior mean; with
+        smoothing on, also the RTS smoother's step (:func:`~quadest.estimators.smoothing.linearized_smoother_step`)."""
         F = self.model.F_err(self.x, u)
+        P_prior = self.P
         self.x = self.model.f(self.x[:, None, :], u)[:, 0]
-        self.P = linearized_covariance(F, self.P, self.model.Q)
+        self.P = linearized_covariance(F, P_prior, self.model.Q)
+        if self.smoothing:
+            factor = self._cholesky(symmetric(self.P), "predicted covariance")
+            self.smoother_step = linearized_smoother_step(P_prior, F, self.model.Q, factor, self.x.copy())
+
+    def smoothing_form(self) -> SmoothingForm:
+        """Covariance form; on a manifold state the model's ⊞/⊟, and its reset Jacobian when this
+        filter resets its covariance."""
+        if not self.model.has_manifold_state:
+            return SmoothingForm()
+        reset = self.model.reset_jacobian if self.reset_covariance else None
+        return SmoothingForm(boxplus=self.model.boxplus, boxminus=self.model.boxminus, reset_jacobian=reset)
 
     def _linearized_measurement(
         self, z: np.ndarray, u: np.ndarray, sensor: str | None
@@ -124,6 +139,7 @@ class ErrorStateEKF(BatchedEKFBase):
         if not isinstance(reset_jacobian, bool | np.bool_):
             raise ValueError(f"reset_jacobian must be true or false, got {reset_jacobian!r}")
         self.reset_jacobian = bool(reset_jacobian)
+        self.reset_covariance = self.reset_jacobian
         self._sqrt_R = psd_sqrt(model.R, "R")
 
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:

@@ -59,6 +59,7 @@ import numpy as np
 from quadest.errors import ConfigError
 from quadest.estimators.base import Estimator
 from quadest.estimators.params import ranged
+from quadest.estimators.particle_smoothing import ParticleCloud
 from quadest.models.base import FilterModel
 from quadest.numerics import psd_sqrt
 from quadest.numerics.draws import particle_kernels, standard_normals, warm_up_particle_kernels
@@ -178,7 +179,7 @@ class ParticleFilter(Estimator):
             or fall back to ``uniform`` weights on the proposed cloud and carry on.
     """
 
-    capabilities: ClassVar[frozenset[str]] = frozenset({"random", "cloud"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"random", "cloud", "particle_smoothing"})
 
     def __init__(
         self,
@@ -309,6 +310,8 @@ class ParticleFilter(Estimator):
         if vanished.any() and self.vanished_weights == "flag":
             self.flag(np.flatnonzero(vanished), f"all particle weights vanished at step {self.step}")
         self.ess_sum += self.ess
+        if self.smoothing:
+            self.smoother_cloud = ParticleCloud(x_new.copy(), w.copy(), self._u_prev.copy())
         if self.estimate == "weighted":
             self._mean, self._cov = weighted_moments(self.x, w)
         due = np.ones_like(vanished) if self.schedule == "every_step" else self.ess < self.ess_threshold * self.N

@@ -44,6 +44,7 @@ from quadest.estimators.gaussian_steps import (
     sigma_point_covariance,
     sigma_points,
 )
+from quadest.estimators.smoothing import SmootherStep, SmoothingForm, sigma_point_smoother_gain
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, cholupdate, psd_sqrt, qr_factor
 from quadest.numerics.huber import HuberCounts, HuberSettings
@@ -71,7 +72,7 @@ class SigmaPointFilter(Estimator):
     """What the covariance and square-root forms share: the rule, the points, the mean, the gain,
     the augmented bookkeeping. A form defines how its second moment is stored and updated."""
 
-    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "smoothing"})
 
     def __init__(
         self, model: FilterModel, rule: IntegrationRule, augmented: bool = False, huber: HuberSettings | None = None
@@ -156,8 +157,10 @@ class SigmaPointFilter(Estimator):
         return point_mean(Y, wm, self.model.boxplus, self.model.boxminus)
 
     def predict(self, u: np.ndarray) -> None:
-        """Time update (eqs 5.15–5.19)."""
+        """Time update (eqs 5.15–5.19); with smoothing on, also the step of the unscented RTS
+        smoother (:mod:`~quadest.estimators.smoothing`) from the same points."""
         ns, q = self.model.n, self.model.process_noise_dim
+        x_prior = self.x
         if self.augmented:
             X = self._points([self.sqrt_Q, self.sqrt_R])
             dim = self.model.n_err + q + self.model.measurement_noise_dim
@@ -165,11 +168,31 @@ class SigmaPointFilter(Estimator):
             self._carried = (X_pred, X[..., ns + q :], dim)
             sqrt_noise = None
         else:
-            X_pred = self.model.f(self._points([]), u)  # (5.15)–(5.16)
+            X = self._points([])  # (5.15)
+            X_pred = self.model.f(X, u)  # (5.16)
             dim, sqrt_noise = self.model.n_err, self.sqrt_Q
         self.x, D = self._mean(X_pred, dim, state=True)  # (5.17)
         self._set_spread(self._spread(D, dim, sqrt_noise))  # (5.18)–(5.19)
+        if self.smoothing:
+            self._record_smoother_step(self.model.boxminus(X[..., :ns], x_prior[:, None, :]), D, dim, sqrt_noise)
         self.quarantine(self.x, self._spread_state(), self._x_safe, self._spread_safe)
+
+    def _record_smoother_step(self, DX: np.ndarray, D: np.ndarray, dim: int, sqrt_noise: np.ndarray | None) -> None:
+        """The smoother step of this predict from the points' deviations before (``DX``) and after
+        (``D``) the model, in this filter's form: ``Z`` is the spread of ``DX − G D`` plus ``G √Q``."""
+        G, E = sigma_point_smoother_gain(self.rule, DX, D, dim, self._factor())
+        noise = None if sqrt_noise is None else G @ sqrt_noise
+        self.smoother_step = SmootherStep(G, self.x.copy(), self._spread(E, dim, noise))
+
+    def smoothing_form(self) -> SmoothingForm:
+        """This filter's form for the smoother: square root or covariance, the model's ⊞/⊟ on a
+        manifold state (no reset Jacobian: the family applies none)."""
+        manifold = self.model.has_manifold_state
+        return SmoothingForm(
+            square_root="sqrt_covariance" in self.capabilities,
+            boxplus=self.model.boxplus if manifold else None,
+            boxminus=self.model.boxminus if manifold else None,
+        )
 
     def _sensor(self, sensor: str | None):
         """``(h, sqrt_R, h_noise)`` of the primary measurement or of ``model.sensors[sensor]``."""
@@ -253,7 +276,7 @@ class SigmaPointKalmanFilter(SigmaPointFilter):
         return S
 
     def _spread(self, D: np.ndarray, dim: int, sqrt_noise: np.ndarray | None) -> np.ndarray:
-        return sigma_point_covariance(self.rule, D, dim, None if sqrt_noise is None else sqrt_noise @ sqrt_noise.T)
+        return sigma_point_covariance(self.rule, D, dim, None if sqrt_noise is None else sqrt_noise @ _t(sqrt_noise))
 
     def _innovation_factor(self, Pyy: np.ndarray) -> np.ndarray:
         Sy, bad = batched_cholesky(Pyy)
@@ -279,7 +302,7 @@ class SquareRootSigmaPointFilter(SigmaPointFilter):
     """Square-root form, the thesis's algorithm (eqs 5.12–5.29) for any rule. A downdate that would
     make a covariance indefinite flags its run (:class:`~quadest.errors.DowndateError`)."""
 
-    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "sqrt_covariance"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "sqrt_covariance", "smoothing"})
 
     def _set_spread_from_P0(self, P0: np.ndarray) -> None:
         self.S = np.linalg.cholesky(P0)  # Sx0 = chol(P0) (5.13)
@@ -304,7 +327,7 @@ class SquareRootSigmaPointFilter(SigmaPointFilter):
         """qr{[rule columns, √noise]} then the rule's rank-one terms (5.18–5.19, 5.23–5.24)."""
         A = self.rule.sqrt_columns(D, dim)
         if sqrt_noise is not None:
-            A = np.concatenate([A, np.broadcast_to(sqrt_noise, (A.shape[0], *sqrt_noise.shape))], axis=-1)
+            A = np.concatenate([A, np.broadcast_to(sqrt_noise, (*A.shape[:-1], sqrt_noise.shape[-1]))], axis=-1)
         S = qr_factor(A)
         for cols, sign in self.rule.rank_one_terms(D, dim):
             S = self._cholupdate(S, cols, sign)

@@ -95,9 +95,12 @@ class SRUKF(SquareRootSigmaPointFilter):
             super().predict(u)
             return
         ut = self.rule.ut(self.model.n)
-        X = self.model.f(unscented_points(self.x, self.S, ut.gamma), u)  # (5.15)–(5.16)
+        points, x_prior = unscented_points(self.x, self.S, ut.gamma), self.x  # (5.15)
+        X = self.model.f(points, u)  # (5.16)
         self.x, self.S, failed = unscented_moments(X, ut, self.sqrt_Q)  # (5.17)–(5.19)
         self._flag_downdates(failed)
+        if self.smoothing:
+            self._record_smoother_step(points - x_prior[:, None, :], X - self.x[:, None, :], self.model.n, self.sqrt_Q)
         self.quarantine(self.x, self.S, self._x_safe, self._spread_safe)
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
