@@ -34,8 +34,8 @@ from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF, FilterpyEKF
 from quadest.estimators.filterpy_ukf import BatchedFilterpyUKF, FilterpyUKF
 from quadest.estimators.srukf import SRUKF
-from quadest.models.registry import build_data
 from quadest.numerics.square_root import KERNELS_ENV
+from quadest.simulation.registry import build_data
 
 RUNS = 50
 

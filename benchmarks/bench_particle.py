@@ -45,15 +45,15 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
 from measure import best_us, fresh_process_runs
+from quadest.app.schema import register_schemas
 from quadest.config.paths import config_dir
-from quadest.config.schema import register_schemas
 from quadest.estimators.particle import BootstrapPF, gather_particles
 from quadest.models.base import _gaussian_logpdf
-from quadest.models.validation import build_ungm_data
 from quadest.numerics import particle_kernels, square_root
 from quadest.numerics.draws import standard_normals
 from quadest.numerics.resampling import RESAMPLING_SCHEMES, normalised_weights, resample_from_uniforms
 from quadest.runner import run_estimator
+from quadest.simulation.validation_data import build_ungm_data
 
 PARTICLES = 1000
 

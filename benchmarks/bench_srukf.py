@@ -38,13 +38,13 @@ from hydra.core.global_hydra import GlobalHydra
 from numba import get_num_threads, njit, prange
 
 from measure import best_us, fresh_process_runs
+from quadest.app.schema import register_schemas
 from quadest.config.paths import config_dir
-from quadest.config.schema import register_schemas
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.srukf import SRUKF
-from quadest.models.quadrotor_data import build_quadrotor_data
 from quadest.numerics import compiled, square_root
+from quadest.simulation.quadrotor_data import build_quadrotor_data
 
 BATCHES = (1, 10, 100, 1000)
 
@@ -78,9 +78,9 @@ def peak_memory_mb(runs: int) -> float:
 import resource
 from hydra import compose, initialize_config_dir
 from quadest.config.paths import config_dir
-from quadest.config.schema import register_schemas
+from quadest.app.schema import register_schemas
 from quadest.estimators.srukf import SRUKF
-from quadest.models.quadrotor_data import build_quadrotor_data
+from quadest.simulation.quadrotor_data import build_quadrotor_data
 from quadest.runner import run_estimator
 register_schemas()
 with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):

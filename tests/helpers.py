@@ -6,8 +6,8 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
+from quadest.app.schema import register_schemas
 from quadest.config.paths import config_dir
-from quadest.config.schema import register_schemas
 from quadest.estimators.base import Estimator
 from quadest.models.base import FilterModel
 from quadest.models.functional import FunctionalModel

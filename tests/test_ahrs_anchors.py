@@ -14,9 +14,9 @@ from quadest.estimators.ahrs_anchors import AhrsEKF, AhrsMadgwick, AhrsMahony
 from quadest.estimators.registry import build_estimator, builtin_estimators, contract_problems
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.montecarlo import MonteCarloData
-from quadest.montecarlo.data import SensorRecord
 from quadest.numerics import quaternion as quat
 from quadest.runner import run_estimator
+from quadest.sensors.record import SensorRecord
 
 ANCHORS = {"madgwick": AhrsMadgwick, "mahony": AhrsMahony, "ahrs_ekf": AhrsEKF}
 T = 0.01

@@ -13,7 +13,6 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from helpers import compose_config
-from quadest.consistency import chi2_band
 from quadest.errors import ConfigError
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.cubature import CKF, SRCKF
@@ -22,13 +21,14 @@ from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.registry import build_estimator
 from quadest.estimators.srukf import SRUKF
+from quadest.evaluation.consistency import chi2_band
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.base import FilterModel
-from quadest.models.registry import build_data
 from quadest.numerics import quaternion as quat
 from quadest.runner import run_estimator
 from quadest.sensors.magnetometer import measure_magnetometer, sample_stride
 from quadest.sensors.mimu import TriadSpec, draw_triad_errors
+from quadest.simulation.registry import build_data
 
 G_EARTH = np.array([0.0, 0.0, -9.81])
 M_EARTH = np.array([20.0, 0.0, -45.0])

@@ -14,11 +14,11 @@ from scipy.spatial.transform import Rotation
 
 from helpers import compose_config
 from quadest.estimators.registry import build_estimator
-from quadest.metrics import convergence_table, convergence_time
+from quadest.evaluation.metrics import convergence_table, convergence_time
 from quadest.models.attitude import attitude_errors_deg
-from quadest.models.registry import build_data
 from quadest.numerics import quaternion as quat
 from quadest.runner import run_estimator
+from quadest.simulation.registry import build_data
 from test_cli import quadest
 
 ROUND_OFF_DEG = 1e-9

@@ -16,14 +16,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import quadest.job as job
+import quadest.app.job as job
 from helpers import compose_config
+from quadest.app.cli import precheck
+from quadest.app.validate import validate
 from quadest.cache import keys
 from quadest.cache.cli import main as cache_main
 from quadest.cache.location import default_cache_dir
 from quadest.cache.store import MAGIC, CacheStore
-from quadest.cli import precheck
-from quadest.config.validate import validate
 from quadest.errors import ConfigError
 from target_plugin import LinearizedKF
 

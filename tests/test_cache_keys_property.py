@@ -12,7 +12,7 @@ the job keys), changing that leaf alone must change the key of everything it can
   it every estimator key.
 
 The leaves are read from the composed configs, which hold every field of their dataclass schemas
-(``quadest.config.schema``) with its default, so a field added to a schema, or a new option in
+(``quadest.app.schema``) with its default, so a field added to a schema, or a new option in
 ``conf/``, is covered without touching this file. Only keys are computed here; nothing is run.
 And the code version follows every source file of the package, in every subpackage.
 """
@@ -29,16 +29,16 @@ import pytest
 from omegaconf import DictConfig, OmegaConf
 
 import quadest
-import quadest.job as job
+import quadest.app.job as job
 from helpers import compose_config
 from quadest.cache import keys
 from quadest.cache.lookup import JobCache
 from quadest.cache.store import CacheStore
 from quadest.config.paths import config_dir
 from quadest.estimators.registry import builtin_estimators
-from quadest.models.registry import model_specs
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import log_path
+from quadest.simulation.registry import model_specs
 
 LeafPath = tuple[str | int, ...]
 
@@ -131,7 +131,7 @@ def with_value(resolved: dict, path: LeafPath, value) -> dict:
 
 def all_keys(resolved: dict, tmp_path: Path) -> tuple[str, dict[str, str | None]]:
     """The data key and every estimator's result key of the resolved config ``resolved``, computed
-    as the job computes them (:func:`quadest.job.run_job` and :func:`quadest.job.run_estimators`)."""
+    as the job computes them (:func:`quadest.app.job.run_job` and :func:`quadest.app.job.run_estimators`)."""
     cache = JobCache(CacheStore(tmp_path / "never-written"), keys.resolved_data_key(resolved))
     bound = float(resolved["divergence_bound"])
     saved_runs = min(int(resolved["output"]["saved_runs"]), int(resolved["runs"]))
@@ -244,7 +244,7 @@ SMALL = ["runs=5", "duration=0.2", "progress=false", "output.figures=false", "wo
 
 @pytest.mark.parametrize("setting", keys.RUNNER_KEYS)
 def test_a_job_recomputes_its_estimators_when_a_runner_setting_changes(setting, tmp_path, monkeypatch):
-    """End to end through :func:`quadest.job.run_job`: the job passes each runner setting into the
+    """End to end through :func:`quadest.app.job.run_job`: the job passes each runner setting into the
     estimator keys (a changed one recomputes the estimator from the cached data)."""
     runs: list[str] = []
     run = job.run_estimator

@@ -15,8 +15,8 @@ import pytest
 from omegaconf import OmegaConf
 
 from helpers import compose_config
+from quadest.app.job import run_job
 from quadest.config.paths import config_dir
-from quadest.job import run_job
 
 SMALL = ["runs=3", "duration=0.5", "progress=false"]
 
@@ -24,7 +24,7 @@ SMALL = ["runs=3", "duration=0.5", "progress=false"]
 def quadest(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
     return subprocess.run(
-        [sys.executable, "-m", "quadest.cli", *args], cwd=cwd, capture_output=True, text=True, timeout=300, env=env
+        [sys.executable, "-m", "quadest.app.cli", *args], cwd=cwd, capture_output=True, text=True, timeout=300, env=env
     )
 
 
@@ -135,7 +135,7 @@ GROUPS = {
     ("model", "sensor", "scenario"), list(itertools.product(GROUPS["model"], GROUPS["sensor"], GROUPS["scenario"]))
 )
 def test_every_group_option_composes_and_validates(model, sensor, scenario):
-    from quadest.config.validate import validate
+    from quadest.app.validate import validate
 
     cfg = compose_config(
         [f"model={model}", f"sensor={sensor}", f"scenario={scenario}", f"estimator=[{','.join(GROUPS['estimator'])}]"]
@@ -198,7 +198,7 @@ def test_failing_estimator_is_recorded_not_fatal(tmp_path):
 
 @pytest.mark.parametrize("experiment", sorted(p.stem for p in (Path(config_dir()) / "experiment").glob("*.yaml")))
 def test_every_experiment_composes_and_validates(experiment):
-    from quadest.config.validate import validate
+    from quadest.app.validate import validate
 
     cfg = compose_config([f"experiment={experiment}"])
     validate(cfg)
@@ -235,13 +235,13 @@ def test_summary_json_names_the_code_that_made_it(tmp_path, monkeypatch):
     """A commit alone does not name the code when the tree held uncommitted changes: the summary
     says whether it did (``commit_dirty``) and carries the source digest (``code_version``), which
     names the code in any tree; outside git the commit is unknown and dirtiness ``None``."""
-    from quadest import job
+    from quadest.app import job
     from quadest.cache.keys import code_version
 
     small_job(tmp_path, "linear", ["model=linear", "estimator=[ekf]"])
     summary = json.loads((tmp_path / "linear" / "summary.json").read_text())
     assert summary["code_version"] == code_version() and summary["commit"] == job.git_commit()
-    answers = {"rev-parse": "abc", "status": " M src/quadest/job.py"}
+    answers = {"rev-parse": "abc", "status": " M src/quadest/app/job.py"}
     monkeypatch.setattr(job, "_git", lambda *args: answers[args[0]])
     assert job.provenance()["commit_dirty"] is True
     answers["status"] = ""

@@ -14,17 +14,17 @@ from omegaconf import OmegaConf
 from scipy.optimize import brentq
 
 from helpers import compose_config
-from quadest.closed_loop.config import validate_loop
+from quadest.app.job import run_job
 from quadest.closed_loop.control_metrics import StepEvent, step_events, step_response
 from quadest.closed_loop.feedback import StateSensorFeedback, estimate_to_controller_state
 from quadest.closed_loop.quadrotor import QuadrotorLoop
 from quadest.closed_loop.report import control_report
+from quadest.config.closed_loop import validate_loop
 from quadest.errors import ConfigError
 from quadest.estimators.base import Estimator
 from quadest.estimators.registry import build_estimator
-from quadest.job import run_job
-from quadest.models.quadrotor_data import build_quadrotor_data, fly_scenario
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.simulation.quadrotor_data import build_quadrotor_data, fly_scenario
 
 # Arrays of the pre-change code (commit e1ca917, before the closed loop existed: its
 # models/quadrotor_data.py and quadrotor/simulate.py loaded from `git show`), runs=2, duration=1.0:

@@ -53,7 +53,8 @@ SWEPT = ["sensor.error_scale", "sweep.alpha", "sweep.beta"]
 def quadest(tmp: Path, out: Path, *overrides: str) -> subprocess.CompletedProcess:
     """``quadest -cd tmp -cn tiny hydra.sweep.dir=out ...`` with one job at a time."""
     (tmp / "tiny.yaml").write_text(TINY)
-    argv = [sys.executable, "-m", "quadest.cli", "-cd", str(tmp), "-cn", "tiny", f"hydra.sweep.dir={out}", *overrides]
+    command = [sys.executable, "-m", "quadest.app.cli"]
+    argv = [*command, "-cd", str(tmp), "-cn", "tiny", f"hydra.sweep.dir={out}", *overrides]
     env = {**os.environ, "QUADEST_WORKERS": "1"}
     return subprocess.run(argv, cwd=tmp, capture_output=True, text=True, timeout=600, env=env)
 

@@ -2,7 +2,7 @@
 
 ``summary.json`` (and the printed per-estimator line) gives, per estimator, the share of time
 steps whose run-averaged NEES and NIS lie inside their two-sided 95 % band
-(``quadest.consistency``; Bar-Shalom, Li & Kirubarajan 2001, §5.4.2): averaged over the N runs
+(``quadest.evaluation.consistency``; Bar-Shalom, Li & Kirubarajan 2001, §5.4.2): averaged over the N runs
 alive at step k, ``N·ε̄_k ~ χ²(N·d)``, with d the dimension of the estimation error (NEES) or of
 the primary measurement (NIS). The two dimensions differ on most models (``model=linear``: 4
 states, 2 measured positions; ``model=attitude``: 9 error states, 3 accelerometer axes), and a
@@ -20,9 +20,9 @@ import pytest
 from scipy.stats import chi2
 
 from helpers import compose_config
-from quadest.job import failed_result
-from quadest.job_tables import estimator_entries, write_metric_tables
-from quadest.models.registry import build_data, model_specs
+from quadest.evaluation.job_tables import estimator_entries, write_metric_tables
+from quadest.montecarlo.results import failed_result
+from quadest.simulation.registry import build_data, model_specs
 
 MODELS = sorted(model_specs())
 RUNS = 3

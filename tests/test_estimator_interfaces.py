@@ -17,7 +17,7 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from helpers import compose_config, random_spd
-from quadest.config.validate import validate
+from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.base import Estimator, PerRunAdapter
 from quadest.estimators.central_difference import SRCDKF
@@ -25,13 +25,14 @@ from quadest.estimators.cubature import CKF
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.srukf import SRUKF
-from quadest.metrics import tidy_metrics
+from quadest.evaluation.metrics import tidy_metrics
+from quadest.evaluation.pcrlb import pcrlb_variances
 from quadest.models.base import MeasurementModel
 from quadest.models.functional import FunctionalModel, LinearGaussianModel
-from quadest.models.registry import build_data
-from quadest.montecarlo.data import MonteCarloData, SensorRecord
-from quadest.pcrlb import pcrlb_variances
+from quadest.montecarlo.data import MonteCarloData
 from quadest.runner import run_estimator
+from quadest.sensors.record import SensorRecord
+from quadest.simulation.registry import build_data
 
 LINEAR = ["model=linear", "sample_period=0.1", "duration=1.0", "progress=false"]
 
@@ -397,7 +398,7 @@ def test_job_summary_reports_nis_per_sensor(tmp_path, monkeypatch):
     """summary.json carries the mean NIS of every further sensor (here: velocity every 3rd step)."""
     import json
 
-    import quadest.job as job
+    import quadest.app.job as job
 
     data, _ = _two_sensor_problem(runs=3)
     data.labels = {"model": "linear"}

@@ -10,7 +10,7 @@ from helpers import compose_config
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF, FilterpyEKF
 from quadest.estimators.filterpy_ukf import BatchedFilterpyUKF, FilterpyUKF
-from quadest.models.registry import build_data
+from quadest.simulation.registry import build_data
 
 BASELINES = {
     "ekf": (lambda m: PerRunAdapter(m, FilterpyEKF), BatchedFilterpyEKF),

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from quadest.aggregate.report import aggregate
-from quadest.formatting import latex_table, markdown_table, strict_json
+from quadest.evaluation.formatting import latex_table, markdown_table, strict_json
 
 
 def _strict_loads(text: str):

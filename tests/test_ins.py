@@ -12,12 +12,11 @@ import pytest
 from scipy.stats import chi2
 
 from helpers import compose_config
-from quadest.config.validate import validate
+from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator
 from quadest.models.ins import InsFilterModel
 from quadest.models.ins_sensors import GpsAiding, MagnetometerAiding, VisionAiding
-from quadest.models.registry import build_data
 from quadest.montecarlo.streams import STREAMS, run_streams
 from quadest.numerics import quaternion as quat
 from quadest.runner import run_estimator
@@ -25,6 +24,7 @@ from quadest.sensors.barometer import BarometerSpec, measure_barometer
 from quadest.sensors.gps import GPSSpec, measure_gps
 from quadest.sensors.mimu import TriadErrors
 from quadest.sensors.vision import VisionSpec, line_of_sight, measure_vision, mount_rotation, project
+from quadest.simulation.registry import build_data
 
 T = 0.01
 # The streams as they were before the navigation sensors were appended (spawn order).

@@ -27,7 +27,7 @@ import pytest
 
 import quadest.numerics
 from helpers import random_spd, run_filter, simulate, smooth_model
-from quadest.config.validate import validate_run
+from quadest.app.validate import validate_run
 from quadest.errors import ConfigError, DowndateError
 from quadest.estimators.srukf import SRUKF
 from quadest.numerics import compiled, square_root
@@ -455,7 +455,7 @@ def test_a_bad_backend_is_a_one_line_config_error(monkeypatch):
 @pytest.fixture(scope="module", params=["thesis", "augmented"])
 def quadrotor(request):
     from helpers import compose_config
-    from quadest.models.quadrotor_data import build_quadrotor_data
+    from quadest.simulation.quadrotor_data import build_quadrotor_data
 
     return build_quadrotor_data(compose_config([f"model.formulation={request.param}", "runs=4", "duration=0.2"]))
 

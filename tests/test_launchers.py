@@ -46,7 +46,7 @@ def run_two_cells(tmp_path: Path, launcher_overrides: list[str], env: dict[str, 
         [
             sys.executable,
             "-m",
-            "quadest.cli",
+            "quadest.app.cli",
             "-cd",
             str(tmp_path),
             "-cn",

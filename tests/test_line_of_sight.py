@@ -11,12 +11,11 @@ import pytest
 from scipy.stats import chi2, norm
 
 from helpers import compose_config
-from quadest.config.validate import validate
+from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator
 from quadest.models.ins import InsFilterModel
 from quadest.models.ins_sensors import VisionAiding
-from quadest.models.registry import build_data
 from quadest.numerics import quaternion as quat
 from quadest.runner import run_estimator
 from quadest.sensors.noise_laws import NoiseLaw
@@ -28,6 +27,7 @@ from quadest.sensors.vision import (
     project,
     projection_jacobian,
 )
+from quadest.simulation.registry import build_data
 
 T = 0.01
 EPS = np.finfo(float).eps

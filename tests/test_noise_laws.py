@@ -14,7 +14,7 @@ import pytest
 from scipy import stats
 
 from helpers import compose_config
-from quadest.config.validate import validate
+from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.sensors.mimu import TriadSpec, draw_triad_errors, measure_triad
 from quadest.sensors.noise_laws import NoiseLaw, draw_noise, noise_multiplier

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from quadest.paired import holm, paired_comparison, summary_lines
+from quadest.evaluation.paired import holm, paired_comparison, summary_lines
 
 STATES = ("vx", "phi")
 

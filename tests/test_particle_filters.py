@@ -333,7 +333,7 @@ def test_upf_benchmark_data_follow_the_model():
     variance 3/4 within 5 standard errors), the measurements by N(0, R) noise, the input is t."""
     from omegaconf import OmegaConf
 
-    from quadest.models.upf_benchmark import build_upf_benchmark_data
+    from quadest.simulation.upf_benchmark_data import build_upf_benchmark_data
 
     model_cfg = {"name": "upf_benchmark", "Q": 0.75, "R": 1e-5, "gamma_shape": 3.0, "gamma_rate": 2.0}
     model_cfg |= {"switch_time": 30.0, "x0": 1.0, "P0": 0.75}

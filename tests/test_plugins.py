@@ -15,15 +15,15 @@ import pandas as pd
 import pytest
 
 from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
+from quadest.app.job import run_job
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.cubature import CKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.params import Range, parameter_problem
 from quadest.estimators.registry import EstimatorSpec, builtin_estimators, make_estimator
-from quadest.job import run_job
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.base import FilterModel
-from quadest.models.quadrotor_data import build_quadrotor_data
+from quadest.simulation.quadrotor_data import build_quadrotor_data
 from quadest.testing import check_estimator, linear_gaussian_problem
 from target_plugin import Crashes, LinearizedKF
 
@@ -195,7 +195,7 @@ def test_plugin_that_raises_marks_only_its_run(tmp_path):
 def quadest(args: list[str], cwd: Path, pythonpath: Path) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(pythonpath), os.environ.get("PYTHONPATH", "")])}
     return subprocess.run(
-        [sys.executable, "-m", "quadest.cli", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300
+        [sys.executable, "-m", "quadest.app.cli", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300
     )
 
 

@@ -7,7 +7,6 @@ import pytest
 
 from helpers import compose_config
 from quadest.models.quadrotor_config import quadrotor_params
-from quadest.models.quadrotor_data import build_quadrotor_data
 from quadest.montecarlo.streams import run_streams
 from quadest.quadrotor.controller import BacksteppingController, BacksteppingGains
 from quadest.quadrotor.dynamics import (
@@ -26,6 +25,7 @@ from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.quadrotor.simulate import simulate_truth
 from quadest.sensors.encoders import encoder_resolution, measure_rotor_speeds
 from quadest.sensors.mimu import TriadSpec, draw_triad_errors, measure_triad
+from quadest.simulation.quadrotor_data import build_quadrotor_data
 
 P = QuadrotorParams()
 

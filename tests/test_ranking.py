@@ -95,8 +95,8 @@ def test_the_ranking_callback_tabulates_the_run_and_the_sweep_when_they_end(tmp_
     from omegaconf import OmegaConf
 
     from quadest.aggregate.callback import RankingCallback
+    from quadest.app.schema import register_schemas
     from quadest.config.paths import config_dir
-    from quadest.config.schema import register_schemas
 
     register_schemas()
     GlobalHydra.instance().clear()

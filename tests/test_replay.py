@@ -237,8 +237,8 @@ def test_a_window_shorter_than_one_step_is_refused(shipped):
 def _replay_config(overrides: list[str]):
     from hydra import compose, initialize_config_dir
 
+    from quadest.app.schema import register_schemas
     from quadest.config.paths import config_dir
-    from quadest.config.schema import register_schemas
 
     register_schemas()
     with initialize_config_dir(config_dir(), version_base="1.3"):
@@ -251,7 +251,7 @@ def _replay_config(overrides: list[str]):
      ("source.warmup=-1", "source.warmup")],
 )  # fmt: skip
 def test_bad_replay_settings_fail_validation_with_one_line(override, key):
-    from quadest.config.validate import validate
+    from quadest.app.validate import validate
 
     with pytest.raises(ConfigError) as err:
         validate(_replay_config([override]))
@@ -260,7 +260,7 @@ def test_bad_replay_settings_fail_validation_with_one_line(override, key):
 
 @pytest.fixture(scope="module")
 def replay_outputs(tmp_path_factory):
-    from quadest.job import run_job
+    from quadest.app.job import run_job
 
     out = tmp_path_factory.mktemp("px4_replay")
     summary = run_job(_replay_config(["progress=false", "workers=1"]), out, ["experiment=px4_replay"])

@@ -72,8 +72,8 @@ def _compose_command(command: str):
     from hydra.core.global_hydra import GlobalHydra
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
+    from quadest.app.schema import register_schemas
     from quadest.config.paths import config_dir
-    from quadest.config.schema import register_schemas
 
     argv = shlex.split(command)[1:]
     folder, name, overrides = config_dir(), "config", []
@@ -98,7 +98,7 @@ def _compose_command(command: str):
 def test_every_manifest_command_composes_and_validates():
     """A regeneration must not stop on a config name or key that no longer exists: each command
     composes and passes the same validation the CLI runs before any work."""
-    from quadest.config.validate import validate
+    from quadest.app.validate import validate
 
     for commands in load_tool().read_manifest().values():
         for command in commands:

@@ -19,7 +19,7 @@ import pytest
 import statsmodels.api as sm
 
 from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
-from quadest.config.validate import validate
+from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.central_difference import CDKF, SRCDKF
 from quadest.estimators.cubature import CKF, CKF5, SRCKF, SRCKF5
@@ -31,10 +31,10 @@ from quadest.estimators.huber import HHCF, HuberCKF
 from quadest.estimators.srukf import SRUKF
 from quadest.models.base import MeasurementModel
 from quadest.models.functional import LinearGaussianModel
-from quadest.models.quadrotor_data import build_quadrotor_data
 from quadest.numerics.huber import HuberSettings, huber_update
 from quadest.numerics.square_root import kalman_gain
 from quadest.sensors.noise_laws import NoiseLaw, draw_noise
+from quadest.simulation.quadrotor_data import build_quadrotor_data
 
 INF = 1e12  # γ beyond any whitened residual
 FAMILY = {"ckf": CKF, "srckf": SRCKF, "ckf5": CKF5, "srckf5": SRCKF5, "cdkf": CDKF, "srcdkf": SRCDKF, "dd1": DD1,

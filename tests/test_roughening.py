@@ -24,7 +24,7 @@ from scipy.stats import chi2, norm
 from helpers import compose_config
 from quadest.estimators.particle import ParticleFilter
 from quadest.estimators.registry import build_estimator, builtin_estimators
-from quadest.models.registry import build_data
+from quadest.simulation.registry import build_data
 
 PARTICLE_FILTERS = sorted(
     name

@@ -10,10 +10,10 @@ from scipy import stats
 
 from helpers import compose_config
 from quadest.estimators.registry import build_estimator
-from quadest.models.registry import build_data
+from quadest.evaluation.pcrlb import pcrlb_is_bound, pcrlb_variances
 from quadest.montecarlo.streams import run_streams
-from quadest.pcrlb import pcrlb_is_bound, pcrlb_variances
 from quadest.runner import run_estimator
+from quadest.simulation.registry import build_data
 
 FAMILY_LEVEL = 0.01  # chance that correct filters fail any comparison of the bound test
 RUNS, DURATION = 30, 3.0  # 150 steps of 20 ms, through the tilt at 2 s

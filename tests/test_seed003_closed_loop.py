@@ -13,18 +13,18 @@ import pytest
 from omegaconf import OmegaConf
 
 from helpers import compose_config
-from quadest.closed_loop.config import validate_loop
+from quadest.app.job import run_job
+from quadest.app.validate import validate_model
 from quadest.closed_loop.control_metrics import StepEvent, step_response
 from quadest.closed_loop.seed003 import Seed003Loop, closed_loop_for, controller_state
 from quadest.closed_loop.seed003_report import paired_rows, seed003_report
-from quadest.config.validate import validate_model
+from quadest.config.closed_loop import validate_loop
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator
-from quadest.job import run_job
-from quadest.models.quadrotor_data import draw_plant
-from quadest.models.registry import build_data
 from quadest.models.seed003_attitude import SLOTS, measure_states, sensor_std, state_sensor_normals
 from quadest.montecarlo.streams import run_streams
+from quadest.simulation.quadrotor_data import draw_plant
+from quadest.simulation.registry import build_data
 from test_closed_loop import _settling_time
 
 

@@ -9,20 +9,20 @@ import numpy as np
 import pytest
 
 from helpers import compose_config
-from quadest.config.validate import validate
+from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.cubature import CKF5
 from quadest.estimators.registry import build_estimator
 from quadest.models.ins import InsFilterModel
 from quadest.models.ins_sensors import VisionAiding
 from quadest.models.quadrotor_config import scenario
-from quadest.models.quadrotor_data import fly_scenario
-from quadest.models.registry import build_data
 from quadest.montecarlo.streams import run_streams
 from quadest.numerics import quaternion as quat
 from quadest.quadrotor.scenarios import PlatformApproach
 from quadest.runner import run_estimator
 from quadest.sensors.vision import VisionSpec, mount_rotation
+from quadest.simulation.quadrotor_data import fly_scenario
+from quadest.simulation.registry import build_data
 
 EXPERIMENT = "experiment=seed004_landing"
 

@@ -17,16 +17,16 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
+from quadest.app.job import run_job
 from quadest.estimators.central_difference import CDKF, SRCDKF
 from quadest.estimators.cubature import CKF, CKF5, SRCKF, SRCKF5
 from quadest.estimators.divided_difference import DD1
 from quadest.estimators.gauss_hermite import GHKF
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter, SquareRootSigmaPointFilter
 from quadest.estimators.srukf import SRUKF
-from quadest.job import run_job
 from quadest.models.functional import FunctionalModel
-from quadest.models.registry import build_data
 from quadest.numerics import rules
+from quadest.simulation.registry import build_data
 from quadest.testing import check_estimator
 
 FAMILY = [

@@ -22,8 +22,8 @@ from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.sigma_point import SquareRootSigmaPointFilter
 from quadest.estimators.srukf import SRUKF
 from quadest.models.functional import FunctionalModel, LinearGaussianModel
-from quadest.models.quadrotor_data import build_quadrotor_data
 from quadest.numerics import ut_weights
+from quadest.simulation.quadrotor_data import build_quadrotor_data
 
 GRID = [(a, b, k) for a in (1e-3, 0.5, 1.0) for b in (0.0, 2.0) for k in ("zero", "3-n")]
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from helpers import compose_config
-from quadest.models.registry import build_data
 from quadest.montecarlo.streams import STREAMS, run_seed_sequences, run_streams
+from quadest.simulation.registry import build_data
 
 # The streams before the estimators' one was appended, in their spawn order (numpy documents that
 # ``SeedSequence(seed).spawn(B)[i].spawn(J)[j]`` is ``SeedSequence(seed, spawn_key=(i, j))``).

@@ -19,8 +19,8 @@ import pytest
 
 from helpers import compose_config
 from quadest.closed_loop.quadrotor import QuadrotorLoop
-from quadest.models.registry import build_data, model_specs
 from quadest.montecarlo.streams import STREAMS
+from quadest.simulation.registry import build_data, model_specs
 
 SEED, RUNS = 31, 3
 CONFIGS = {name: [f"model={name}", "duration=0.3"] for name in sorted(model_specs())}

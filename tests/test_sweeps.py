@@ -23,12 +23,12 @@ from omegaconf import OmegaConf
 from quadest.aggregate.cli import main as aggregate_main
 from quadest.aggregate.report import aggregate
 from quadest.aggregate.sweep import expected_jobs
-from quadest.config.schema import register_schemas
-from quadest.config.validate import validate
+from quadest.app.schema import register_schemas
+from quadest.app.validate import validate
 from quadest.estimators.registry import resolve
 from quadest.models.quadrotor_config import triad_spec
-from quadest.models.registry import build_data
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.simulation.registry import build_data
 from quadest.testing import check_sigma_point_moments
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -302,7 +302,7 @@ def run_sweep(tmp: Path, launcher: str) -> Path:
         [
             sys.executable,
             "-m",
-            "quadest.cli",
+            "quadest.app.cli",
             "-cd",
             str(tmp),
             "-cn",

@@ -1,4 +1,4 @@
-"""Tuning: the objective (quadest.objective) on constructed summaries with a hand-computed value,
+"""Tuning: the objective (quadest.evaluation.objective) on constructed summaries with a hand-computed value,
 its one-line errors, and a real 4-trial Optuna search (conf/hparams_search/ut_optuna.yaml) whose
 best value is the smallest objective recomputed from the trials' own summary.json files."""
 
@@ -13,8 +13,8 @@ import pytest
 import yaml
 from omegaconf import OmegaConf
 
-from quadest.cli import precheck
-from quadest.objective import objective_value
+from quadest.app.cli import precheck
+from quadest.evaluation.objective import objective_value
 
 pytest.importorskip("hydra_plugins.hydra_optuna_sweeper", reason="needs the `tune` extra (in `test`)")
 
@@ -64,7 +64,7 @@ def test_four_optuna_trials_minimise_the_returned_objective(tmp_path):
         [
             sys.executable,
             "-m",
-            "quadest.cli",
+            "quadest.app.cli",
             "hparams_search=ut_optuna",
             "runs=2",
             "duration=0.3",

@@ -11,15 +11,15 @@ from filterpy.kalman import KalmanFilter
 from scipy import stats
 
 from helpers import compose_config, run_filter
-from quadest.consistency import chi2_band, fraction_inside
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import FilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.registry import build_estimator
 from quadest.estimators.srukf import SRUKF
-from quadest.models.registry import build_data
-from quadest.pcrlb import pcrlb_caption, pcrlb_is_bound, pcrlb_variances
+from quadest.evaluation.consistency import chi2_band, fraction_inside
+from quadest.evaluation.pcrlb import pcrlb_caption, pcrlb_is_bound, pcrlb_variances
 from quadest.runner import run_estimator
+from quadest.simulation.registry import build_data
 
 
 def test_chi2_band_matches_the_reference_values():
@@ -40,7 +40,7 @@ def test_cli_runs_validation_models(tmp_path, model):
         f"hydra.run.dir={tmp_path / model}",
     ]
     proc = subprocess.run(
-        [sys.executable, "-m", "quadest.cli", *args], capture_output=True, text=True, cwd=tmp_path, timeout=300
+        [sys.executable, "-m", "quadest.app.cli", *args], capture_output=True, text=True, cwd=tmp_path, timeout=300
     )
     assert proc.returncode == 0, proc.stderr
     assert "PCRLB" in proc.stdout
@@ -50,7 +50,7 @@ def test_cli_runs_validation_models(tmp_path, model):
 
 @pytest.fixture(scope="module")
 def linear_data():
-    # T = 0.1 s: cond(Q) ≈ 1e3; the information form loses about cond(Q)·eps (see quadest.pcrlb)
+    # T = 0.1 s: cond(Q) ≈ 1e3; the information form loses about cond(Q)·eps (see quadest.evaluation.pcrlb)
     return build_data(compose_config(["model=linear", "runs=50", "duration=30.0", "sample_period=0.1"]))
 
 

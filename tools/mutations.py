@@ -60,11 +60,12 @@ REPLAY_TIMING = "tests/test_replay_timing.py::"
 BANDS = "tests/test_consistency_bands.py::"
 ROUGHENING = "tests/test_roughening.py::"
 PARTICLE_KERNELS = "tests/test_particle_kernels.py::"
+STEPS = "tests/test_gaussian_steps.py::"
 
 MUTATIONS = (
     Mutation(
         "diverged runs kept in the RMSE",
-        "src/quadest/runner.py",
+        "src/quadest/montecarlo/results.py",
         "out = np.sqrt(out) if root else out\n        out[self.diverged] = np.nan\n",
         "out = np.sqrt(out) if root else out\n",
         (GAPS + "test_a_run_diverging_midway_counts_only_its_steps_before_divergence",
@@ -86,7 +87,7 @@ MUTATIONS = (
     ),
     Mutation(
         "data drawn from a seed that depends on the estimator kind",
-        "src/quadest/job.py",
+        "src/quadest/app/job.py",
         "(label, nodes[label], data, bound, saved_runs",
         '(label, nodes[label], build_data(OmegaConf.merge(cfg, {"seed": int(cfg.seed) + sum(map(ord, '
         'nodes[label].get("kind", label)))})), bound, saved_runs',
@@ -95,14 +96,14 @@ MUTATIONS = (
     ),
     Mutation(
         "PCRLB 25 % too high (filters would 'beat' a true bound)",
-        "src/quadest/pcrlb.py",
+        "src/quadest/evaluation/pcrlb.py",
         "out[k] = np.diag(np.linalg.inv(J))",
         "out[k] = 1.25 * np.diag(np.linalg.inv(J))",
         (VALIDATION + "test_no_filter_beats_the_pcrlb[linear-100]",),
     ),
     Mutation(
         "PCRLB called a bound on the quadrotor",
-        "src/quadest/pcrlb.py",
+        "src/quadest/evaluation/pcrlb.py",
         "return model_name in TRUTH_FROM_FILTER_MODEL",
         "return True",
         (VALIDATION + "test_pcrlb_is_called_a_bound_only_where_it_is_one",),
@@ -309,7 +310,7 @@ MUTATIONS = (
     ),
     Mutation(
         "NIS band share with the state's degrees of freedom",
-        "src/quadest/metrics.py",
+        "src/quadest/evaluation/metrics.py",
         '"nis_in_band": fraction_inside(res.nis_mean_t, m, res.alive_t)',
         '"nis_in_band": fraction_inside(res.nis_mean_t, n, res.alive_t)',
         (BANDS + "test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis[linear]",
@@ -393,6 +394,41 @@ MUTATIONS = (
         "        warm_up_particle_kernels()\n",
         "",
         (PARTICLE_KERNELS + "test_constructing_a_particle_filter_loads_every_particle_kernel_before_any_timed_call",),
+    ),
+    Mutation(
+        "linearised time update without the process noise",
+        "src/quadest/estimators/gaussian_steps.py",
+        "return F @ P @ _t(F) + Q",
+        "return F @ P @ _t(F)",
+        (STEPS + "test_linearized_steps_are_filterpys_kalman_filter_on_a_linear_model",),
+    ),
+    Mutation(
+        "posterior covariance adds K Pyy Kᵀ",
+        "src/quadest/estimators/gaussian_steps.py",
+        "return symmetric(P - K @ Pyy @ _t(K))",
+        "return symmetric(P + K @ Pyy @ _t(K))",
+        (STEPS + "test_linearized_steps_are_filterpys_kalman_filter_on_a_linear_model",),
+    ),
+    Mutation(
+        "vector sigma points not moved to the mean",
+        "src/quadest/estimators/gaussian_steps.py",
+        "X[..., :n] += x[..., None, :]",
+        "X[..., :n] += 0.0",
+        (STEPS + "test_every_rule_gives_the_exact_moments_of_a_linear_map[cd]",),
+    ),
+    Mutation(
+        "manifold deviations by plain subtraction",
+        "src/quadest/estimators/gaussian_steps.py",
+        "return mean, boxminus(Y, mean[..., None, :])",
+        "return mean, Y - mean[..., None, :]",
+        (STEPS + "test_points_on_a_manifold_use_its_boxplus_and_the_mean_its_boxminus",),
+    ),
+    Mutation(
+        "EKPF proposal conditions with the model's R instead of its own",
+        "src/quadest/estimators/particle_ekpf.py",
+        "moments = linearized_moments(model.h(x_pred, u), H, P_pred, self.R_proposal)",
+        "moments = linearized_moments(model.h(x_pred, u), H, P_pred, model.R)",
+        (STEPS + "test_ekpf_proposal_is_filterpys_kalman_step_from_every_particle",),
     ),
 )  # fmt: skip
 

@@ -45,7 +45,7 @@ def run(command: str) -> bool:
     if argv[0] == "python":
         argv[0] = sys.executable
     elif argv[0] == "quadest":
-        argv = [sys.executable, "-m", "quadest.cli", *argv[1:]]
+        argv = [sys.executable, "-m", "quadest.app.cli", *argv[1:]]
     start = time.perf_counter()
     done = subprocess.run(argv, cwd=ROOT, check=False)
     print(f"  {time.perf_counter() - start:6.0f} s  exit {done.returncode}  {command}", flush=True)

@@ -30,5 +30,5 @@ One module per job: :mod:`~quadest.aggregate.sweep` reads the folder,
 with the best, :mod:`~quadest.aggregate.compact` writes the compact aggregate,
 :mod:`~quadest.aggregate.report` writes everything,
 :mod:`~quadest.aggregate.callback` and :mod:`~quadest.aggregate.cli` are the two ways in. The
-Markdown and LaTeX rendering is shared with the job (:mod:`quadest.formatting`).
+Markdown and LaTeX rendering is shared with the job (:mod:`quadest.evaluation.formatting`).
 """

@@ -43,7 +43,7 @@ from quadest.aggregate.versus_best import (
     versus_best,
     versus_best_counts,
 )
-from quadest.formatting import markdown_table
+from quadest.evaluation.formatting import markdown_table
 
 CELL_TABLE = "cells_compact.csv"
 FLOAT_FORMAT = "%.6g"

@@ -3,7 +3,7 @@
 
 Ranking. Per run, the 3-D position and velocity RMSE (root of the sum of the three axes' mean
 squares) and the attitude error angle's RMSE (``error_angle``), then the job's own paired
-comparison (:func:`quadest.paired.paired_comparison` on these three grouped states: paired
+comparison (:func:`quadest.evaluation.paired.paired_comparison` on these three grouped states: paired
 bootstrap CI, Wilcoxon, Holm over every pair of the job's estimators × the three states) for each
 step of :data:`STEPS`. A step *holds* when its Holm-corrected Wilcoxon p is below 0.05 and the
 better-ranked filter has the smaller RMSE, is *reversed* when p < 0.05 the other way, and is
@@ -32,7 +32,7 @@ import pandas as pd
 from scipy import stats
 
 from quadest.aggregate.sweep import load_sweep
-from quadest.paired import CONFIDENCE, paired_comparison
+from quadest.evaluation.paired import CONFIDENCE, paired_comparison
 
 GROUPS = {"position_3d": ("x", "y", "z"), "velocity_3d": ("vx", "vy", "vz")}
 STEPS = (

@@ -15,7 +15,7 @@ from quadest.aggregate.statistics import paired_summary, tables, with_confidence
 from quadest.aggregate.sweep import load_paired, load_sweep
 from quadest.aggregate.versus_best import heat_maps, run_scores, ut_parameter, versus_best, versus_best_counts
 from quadest.errors import ConfigError
-from quadest.formatting import latex_table, markdown_table, strict_json
+from quadest.evaluation.formatting import latex_table, markdown_table, strict_json
 
 OUTPUT_KEY = "hydra.callbacks.aggregate.output"
 """The key that chooses the aggregate's output (an argument of

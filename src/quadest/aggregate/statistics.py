@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import t as student_t
 
-from quadest.paired import SIGNIFICANCE
+from quadest.evaluation.paired import SIGNIFICANCE
 
 
 def with_confidence_interval(cells: pd.DataFrame) -> pd.DataFrame:

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from quadest.paired import paired_comparison
+from quadest.evaluation.paired import paired_comparison
 
 # Columns the aggregate tables use themselves; an override with one of these names (``runs=20``)
 # becomes ``override.<name>``.

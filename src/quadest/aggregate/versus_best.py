@@ -9,8 +9,8 @@ the group's states; the *best* cell has the smallest mean score, and every cell 
 difference to it, ``d_i = score_cell,i − score_best,i`` over the runs that diverged in neither, with
 the Student t 95 % interval of the mean difference, ``d̄ ± t_{0.975, n−1} s_d / √n``. A cell
 *differs* from the best when that interval lies above zero. Per-run differences below
-:data:`quadest.paired.ROUND_OFF` times the best score count as zero (filters equal in exact
-arithmetic differ at round-off, systematically: docs of :mod:`quadest.paired`). The intervals are
+:data:`quadest.evaluation.paired.ROUND_OFF` times the best score count as zero (filters equal in exact
+arithmetic differ at round-off, systematically: docs of :mod:`quadest.evaluation.paired`). The intervals are
 per cell, not simultaneous over the grid: with many cells a few "differs" are expected by chance
 among cells that do not.
 
@@ -37,7 +37,7 @@ import pandas as pd
 from PIL import Image
 from scipy.stats import t as student_t
 
-from quadest.paired import CONFIDENCE, ROUND_OFF
+from quadest.evaluation.paired import CONFIDENCE, ROUND_OFF
 
 UT_PARAMETERS = ("alpha", "beta", "kappa")
 GROUPS = {"m/s": "velocities", "rad/s": "angle rates", "rad": "angles", "m": "positions"}

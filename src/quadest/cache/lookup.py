@@ -9,7 +9,7 @@ from quadest.cache.keys import data_key, digest_text, estimator_key
 from quadest.cache.location import cache_dir
 from quadest.cache.store import CacheStore
 from quadest.montecarlo import MonteCarloData
-from quadest.runner import EstimatorResult
+from quadest.montecarlo.results import EstimatorResult
 
 
 class JobCache:

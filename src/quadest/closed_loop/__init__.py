@@ -1,6 +1,5 @@
 """The estimator in the control loop (seed 003).
 
-- :mod:`~quadest.closed_loop.config`: the ``loop`` key, the state sensor and the crash limits;
 - :mod:`~quadest.closed_loop.feedback`: what the controller reads (truth, noisy states, an estimate);
 - :mod:`~quadest.closed_loop.loop`: the plant flown under a controller and a feedback source;
 - :mod:`~quadest.closed_loop.control_metrics`: tracking, step-response and effort metrics;
@@ -10,5 +9,6 @@
 - :mod:`~quadest.closed_loop.job`: a job with ``loop`` other than ``open``;
 - :mod:`~quadest.closed_loop.report`: the sweep callback that tabulates the loop modes side by side.
 
-See ``docs/closed-loop.md``.
+Its settings (the ``loop`` key, the state sensor and the crash limits) are
+:mod:`quadest.config.closed_loop`, which the models read too. See ``docs/closed-loop.md``.
 """

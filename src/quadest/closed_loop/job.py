@@ -13,7 +13,6 @@ truth) is left out: its column is empty and ``summary.json`` says why.
 from __future__ import annotations
 
 import multiprocessing
-from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -22,38 +21,38 @@ import numpy as np
 import pandas as pd
 from omegaconf import OmegaConf
 
-from quadest.closed_loop.config import validate_loop
 from quadest.closed_loop.control_metrics import summarize_control
 from quadest.closed_loop.figures import plot_tracking
 from quadest.closed_loop.loop import Flight
 from quadest.closed_loop.quadrotor import QuadrotorLoop
 from quadest.closed_loop.seed003 import closed_loop_for
+from quadest.config.closed_loop import validate_loop
 from quadest.estimators.registry import build_estimator, estimator_parameters
-from quadest.formatting import markdown_table, strict_json
-from quadest.job_tables import estimator_entries, json_float, write_metric_tables
+from quadest.evaluation.formatting import markdown_table, strict_json
+from quadest.evaluation.job_tables import estimator_entries, json_float, write_metric_tables
+from quadest.evaluation.paired import summary_lines
+from quadest.evaluation.pcrlb import pcrlb_caption, pcrlb_variances
+from quadest.evaluation.plotting import plot_truth_vs_estimate
 from quadest.montecarlo import MonteCarloData
-from quadest.paired import summary_lines
-from quadest.pcrlb import pcrlb_caption, pcrlb_variances
-from quadest.plotting import plot_truth_vs_estimate
-from quadest.runner import EstimatorResult, run_estimator
+from quadest.montecarlo.results import EstimatorResult, failed_result
+from quadest.runner import run_estimator
 
 PCRLB_NOTE = "left out with loop=estimate: each estimator flies its own truth, and the PCRLB is a bound along one truth"
-FailedResult = Callable[[str, MonteCarloData, str], EstimatorResult]
 
 
 def _on_shared_flight(
-    label: str, node: dict, data: MonteCarloData, flight: Flight, bound: float, saved: int, failed: FailedResult
+    label: str, node: dict, data: MonteCarloData, flight: Flight, bound: float, saved: int
 ) -> EstimatorResult:
     """``truth`` / ``measured``: the estimator watches the shared flight; crashed runs end there."""
     try:
         est = build_estimator(label, node, data.model)
         return run_estimator(label, est, data, bound, saved, crashes=(flight.crash_step, flight.crash_reasons))
     except Exception as exc:  # a broken estimator is recorded, never fatal to the job
-        return failed(label, data, f"{type(exc).__name__}: {exc}")
+        return failed_result(label, data, f"{type(exc).__name__}: {exc}")
 
 
 def _in_loop(
-    loop: QuadrotorLoop, label: str, node: dict, bound: float, saved: int, failed: FailedResult
+    loop: QuadrotorLoop, label: str, node: dict, bound: float, saved: int
 ) -> tuple[EstimatorResult, Flight | None, MonteCarloData]:
     """``estimate``: the estimator flies its own plants. An estimator that cannot be built (or
     raises in flight) has no flight; every run is flagged with the reason."""
@@ -63,7 +62,7 @@ def _in_loop(
         return loop.fly_estimator(label, est, bound, saved)
     except Exception as exc:  # a broken estimator is recorded, never fatal to the job
         data = loop.empty_data(model)
-        return failed(label, data, f"{type(exc).__name__}: {exc}"), None, data
+        return failed_result(label, data, f"{type(exc).__name__}: {exc}"), None, data
 
 
 def _parallel(fn, tasks: list[tuple], workers: int) -> list:
@@ -86,12 +85,12 @@ def _control_table(loop: QuadrotorLoop, flights: dict[str, Flight | None], runs:
     return pd.concat(frames, ignore_index=True)
 
 
-def run_closed_loop_job(cfg, out_dir: Path, overrides: list[str] | None, header: dict, failed: FailedResult) -> dict:
+def run_closed_loop_job(cfg, out_dir: Path, overrides: list[str] | None, header: dict) -> dict:
     """Run a closed-loop job (``loop`` ≠ ``open``) and write its outputs into ``out_dir``.
 
-    ``header`` holds the summary's ``schema_version`` and ``commit``; ``failed(name, data,
-    reason)`` makes the result of an estimator that could not run. Returns the JSON summary, with
-    the printed tables under ``_table`` and ``_paired`` as the open-loop job does.
+    ``header`` holds the summary's ``schema_version`` and ``commit``; an estimator that could not
+    run is recorded with :func:`~quadest.montecarlo.results.failed_result`. Returns the JSON
+    summary, with the printed tables under ``_table`` and ``_paired`` as the open-loop job does.
     """
     validate_loop(cfg)
     out_dir = Path(out_dir)
@@ -105,7 +104,7 @@ def run_closed_loop_job(cfg, out_dir: Path, overrides: list[str] | None, header:
     loop = closed_loop_for(cfg)
 
     if mode == "estimate":
-        outcomes = _parallel(_in_loop, [(loop, label, node, bound, saved, failed) for label, node in nodes.items()],
+        outcomes = _parallel(_in_loop, [(loop, label, node, bound, saved) for label, node in nodes.items()],
                              workers)  # fmt: skip
         results = [o[0] for o in outcomes]
         flights = {label: o[1] for label, o in zip(nodes, outcomes, strict=True)}
@@ -115,7 +114,7 @@ def run_closed_loop_job(cfg, out_dir: Path, overrides: list[str] | None, header:
         pcrlb, pcrlb_note = np.full((K1, n), np.nan), PCRLB_NOTE
     else:
         flight, data = loop.fly_shared(mode)
-        tasks = [(label, node, data, flight, bound, saved, failed) for label, node in nodes.items()]
+        tasks = [(label, node, data, flight, bound, saved) for label, node in nodes.items()]
         results = _parallel(_on_shared_flight, tasks, workers)
         flights, own_data = {mode: flight}, dict.fromkeys(nodes, data)
         pcrlb, pcrlb_note = pcrlb_variances(data), None

@@ -3,7 +3,7 @@ the three ways of flying it.
 
 - ``truth`` and ``measured``: the flight does not depend on any estimator, so it is flown once
   and measured exactly as the open loop measures its truth
-  (:func:`~quadest.models.quadrotor_data.record_quadrotor_data`); every estimator then runs on the
+  (:func:`~quadest.simulation.quadrotor_data.record_quadrotor_data`); every estimator then runs on the
   same data. With ``truth`` the flight is the open loop's, bit for bit.
 - ``estimate``: each estimator flies its own plant, stepped together with it (all runs of one
   estimator and its plants as one batch), from the same draws as every other estimator.
@@ -15,27 +15,28 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from quadest.closed_loop.config import closed_loop_settings
 from quadest.closed_loop.control_metrics import StepEvent, control_metrics, step_events
 from quadest.closed_loop.feedback import EstimateFeedback, StateSensorFeedback, TruthFeedback
 from quadest.closed_loop.loop import CrashLimits, Flight, fly
+from quadest.config.closed_loop import closed_loop_settings
 from quadest.estimators.base import Estimator
 from quadest.models.quadrotor import QuadrotorFilterModel
 from quadest.models.quadrotor_config import controller_gains, quadrotor_params, scenario
-from quadest.models.quadrotor_data import (
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.data import sample_count
+from quadest.montecarlo.results import EstimatorResult
+from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.quadrotor.controller import BacksteppingController
+from quadest.quadrotor.plant import PlantDraws, QuadrotorPlant
+from quadest.quadrotor.scenarios import AttitudeSteps, Reference, Scenario
+from quadest.runner import EstimatorTracker, FilterStart
+from quadest.simulation.quadrotor_data import (
     data_labels,
     draw_plant,
     initial_condition,
     quadrotor_filter_model,
     record_quadrotor_data,
 )
-from quadest.montecarlo import MonteCarloData
-from quadest.montecarlo.data import sample_count
-from quadest.montecarlo.streams import run_seed_sequences, run_streams
-from quadest.quadrotor.controller import BacksteppingController
-from quadest.quadrotor.plant import PlantDraws, QuadrotorPlant
-from quadest.quadrotor.scenarios import AttitudeSteps, Reference, Scenario
-from quadest.runner import EstimatorResult, EstimatorTracker, FilterStart
 
 
 @dataclass

@@ -13,7 +13,7 @@ from hydra.experimental.callback import Callback
 
 from quadest.closed_loop.control_metrics import step_events, summarize_control
 from quadest.closed_loop.figures import plot_tracking
-from quadest.formatting import markdown_table
+from quadest.evaluation.formatting import markdown_table
 
 
 def format_cell(mean: float, low: float, high: float, n: int, runs: int) -> str:

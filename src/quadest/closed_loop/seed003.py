@@ -21,18 +21,11 @@ import numpy as np
 
 from quadest.closed_loop.feedback import TruthFeedback
 from quadest.closed_loop.quadrotor import QuadrotorLoop
-from quadest.models.seed003_attitude import (
-    SLOTS,
-    AttitudeRateModel,
-    measure_states,
-    seed003_data,
-    seed003_filter_model,
-    seed003_labels,
-    sensor_std,
-)
+from quadest.models.seed003_attitude import SLOTS, AttitudeRateModel, measure_states, seed003_filter_model, sensor_std
 from quadest.montecarlo import MonteCarloData
 from quadest.quadrotor.plant import QuadrotorPlant
 from quadest.runner import EstimatorTracker
+from quadest.simulation.seed003_attitude_data import seed003_data, seed003_labels
 
 
 def controller_state(truth: np.ndarray, states: np.ndarray) -> np.ndarray:

@@ -25,7 +25,7 @@ from omegaconf import OmegaConf
 from quadest.closed_loop.control_metrics import mean_ci, step_events
 from quadest.closed_loop.figures import plot_tracking
 from quadest.closed_loop.report import format_cell
-from quadest.formatting import markdown_table
+from quadest.evaluation.formatting import markdown_table
 from quadest.models.seed003_attitude import AttitudeRateModel, one_step_error_variance, seed003_filter_model
 
 ARMS = {"estimate": "ekf_in", "measured": "ekf_out", "truth": "truth"}

@@ -2,7 +2,7 @@
 ``model=ins``), and the settled attitude-error table of a finished job.
 
 The job draws the figures for models that declare them (``extra_figures``,
-:func:`quadest.plotting.plot_extra_figures`) from its saved runs, and reports the RMSE of the
+:func:`quadest.evaluation.plotting.plot_extra_figures`) from its saved runs, and reports the RMSE of the
 error angle and of the roll, pitch, yaw errors over all runs and steps as its ``derived`` rows
 (:class:`quadest.models.attitude.AttitudeMetrics`):
 

@@ -354,8 +354,8 @@ class FilterModel(ABC):
         of quantity ``derived`` in the metrics tables). None unless a model declares them.
 
         ``bias_states`` names the error states that are sensor biases (the job reports their
-        convergence time, :func:`quadest.metrics.convergence_table`); ``extra_figures`` names
-        figures of :data:`quadest.plotting.EXTRA_FIGURES` the job draws for this model."""
+        convergence time, :func:`quadest.evaluation.metrics.convergence_table`); ``extra_figures`` names
+        figures of :data:`quadest.evaluation.plotting.EXTRA_FIGURES` the job draws for this model."""
         return np.zeros((*estimate.shape[:-1], 0))
 
     # --- batches ---

@@ -1,5 +1,5 @@
 """Range checks of each model option's ``cfg.model`` node, run before any work starts (the
-schemas already check types and keys). :mod:`quadest.models.registry` pairs each with its model."""
+schemas already check types and keys). :mod:`quadest.simulation.registry` pairs each with its model."""
 
 from __future__ import annotations
 

@@ -23,20 +23,20 @@ attitude states a quadrotor's backstepping loop flies on, so ``x = (φ, θ, p, q
   ``closed_loop.state_sensor`` (σ = 2°, 5 °/s), drawn from the run's ``state_sensor`` stream, the
   same draws the noisy-state controller reads (:mod:`quadest.closed_loop.seed003`);
 - start: the first measurement, ``x0 = z_0``, with ``P0 = R``.
+
+The Monte Carlo data (open loop, and the closed loop's shared flight) is built by
+:mod:`quadest.simulation.seed003_attitude_data`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from quadest.closed_loop.config import closed_loop_settings
+from quadest.config.closed_loop import closed_loop_settings
 from quadest.config.ranges import require_positive
 from quadest.errors import ConfigError
 from quadest.models.base import FilterModel
 from quadest.models.config_checks import validate_quadrotor
-from quadest.models.quadrotor_data import fly_scenario
-from quadest.montecarlo import MonteCarloData
-from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.quadrotor.dynamics import body_angular_accel, body_rate_jacobian, euler_rates, rotor_inputs
 from quadest.quadrotor.params import QuadrotorParams
 
@@ -115,7 +115,7 @@ def measure_states(truth: np.ndarray, normals: np.ndarray, std: np.ndarray) -> n
 
 def state_sensor_normals(streams: dict, samples: int) -> np.ndarray:
     """(B, K+1, 12) standard normals of the state sensor, one row of 12 per sample from each run's
-    ``state_sensor`` stream: the draws of :func:`quadest.models.quadrotor_data.draw_plant`."""
+    ``state_sensor`` stream: the draws of :func:`quadest.simulation.quadrotor_data.draw_plant`."""
     return np.stack([rng.standard_normal((samples, 12)) for rng in streams["state_sensor"]])
 
 
@@ -129,28 +129,6 @@ def seed003_filter_model(cfg, runs: int) -> AttitudeRateModel:
     )
 
 
-def seed003_data(cfg, truth_state: np.ndarray, normals: np.ndarray, labels: dict) -> MonteCarloData:
-    """The data of a flight ``truth_state`` (B, K+1, 16): the five states measured with the state
-    sensor's noise from ``normals`` (B, K+1, 12), rotor speeds of the truth as input, and every run
-    started at its first measurement with ``P0 = R``."""
-    runs, K1 = truth_state.shape[:2]
-    model = seed003_filter_model(cfg, runs)
-    z = measure_states(truth_state, normals, sensor_std(cfg))
-    return MonteCarloData(
-        model, np.arange(K1) * float(cfg.sample_period), model.truth_to_state(truth_state),
-        np.zeros((runs, K1, 0)), truth_state[..., ROTORS], z, z[:, 0].copy(), model.R.copy(), np.zeros((runs, 0)),
-        run_seed_sequences(int(cfg.seed), runs)["estimator"], labels,
-    )  # fmt: skip
-
-
-def seed003_labels(cfg, scenario_name: str) -> dict:
-    """The descriptive columns of a seed 003 job's metrics table."""
-    return {
-        "model": cfg.model.name, "formulation": cfg.model.name, "calibrated": True, "sensor": "state_sensor",
-        "error_scale": np.nan, "scenario": scenario_name, "encoder_resolution": np.nan,
-    }  # fmt: skip
-
-
 def validate_seed003_attitude(cfg) -> None:
     """Range checks of ``model=seed003_attitude``: the quadrotor's, and Q and R, five positive
     variances each (a zero in R would make the posterior covariance singular)."""
@@ -162,15 +140,6 @@ def validate_seed003_attitude(cfg) -> None:
     for i, (q, r) in enumerate(zip(cfg.model.Q, cfg.model.R, strict=True)):
         require_positive(f"model.Q[{i}]", q)
         require_positive(f"model.R[{i}]", r)
-
-
-def build_seed003_attitude_data(cfg) -> MonteCarloData:
-    """Open loop: fly the scenario on the truth (the controller reads the true state) and measure
-    the five states with the state sensor."""
-    streams = run_streams(int(cfg.seed), int(cfg.runs))
-    _params, flown, truth = fly_scenario(cfg, streams)
-    normals = state_sensor_normals(streams, truth.state.shape[1])
-    return seed003_data(cfg, truth.state, normals, seed003_labels(cfg, flown.name))
 
 
 def one_step_error_variance(model: AttitudeRateModel, truth: np.ndarray) -> np.ndarray:

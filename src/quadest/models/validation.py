@@ -10,6 +10,9 @@ true floor on both.
   1993), the standard nonlinear benchmark:
   ``x_k = 0.5 x_{k−1} + 25 x_{k−1}/(1 + x_{k−1}²) + 8 cos(1.2 (k−1)) + q_k``,
   ``y_k = x_k²/20 + r_k``. The input is the time index, ``u_{k−1} = k − 1``.
+
+Their Monte Carlo data (truth, measurements, initial estimates) is built by
+:mod:`quadest.simulation.validation_data`.
 """
 
 from __future__ import annotations
@@ -21,10 +24,6 @@ import numpy as np
 
 from quadest.models.base import FilterModel
 from quadest.models.functional import LinearGaussianModel
-from quadest.montecarlo import MonteCarloData
-from quadest.montecarlo.data import sample_count
-from quadest.montecarlo.initial import draw_initial_estimates, initial_covariance
-from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.numerics.square_root import kernel_backend
 
 
@@ -121,69 +120,3 @@ class UNGMModel(FilterModel):
 
     def H_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return (x / 10.0)[:, :, None]
-
-
-def _simulate(model: FilterModel, x0: np.ndarray, inputs: np.ndarray, streams) -> tuple[np.ndarray, np.ndarray]:
-    """Truth and measurements with the model's own Q and R, one generator per run."""
-    B, K1 = inputs.shape[:2]
-    LQ, LR = np.linalg.cholesky(model.Q), np.linalg.cholesky(model.R)
-    process = np.array([rng.standard_normal((K1, model.n)) for rng in streams["process"]]) @ LQ.T
-    noise = np.array([rng.standard_normal((K1, model.m)) for rng in streams["measurement"]]) @ LR.T
-    x = np.empty((B, K1, model.n))
-    x[:, 0] = x0
-    for k in range(1, K1):
-        x[:, k] = model.f(x[:, k - 1][:, None], inputs[:, k - 1])[:, 0] + process[:, k]
-    z = np.stack([model.h(x[:, k][:, None], inputs[:, k])[:, 0] for k in range(K1)], axis=1) + noise
-    return x, z
-
-
-def simulation_labels(cfg) -> dict:
-    """The metrics-table labels of a model whose data is not a quadrotor flight (no sensor,
-    scenario or encoder: those columns stay empty)."""
-    return {
-        "model": cfg.model.name,
-        "formulation": cfg.model.name,
-        "calibrated": True,
-        "sensor": "",
-        "error_scale": np.nan,
-        "scenario": "",
-        "encoder_resolution": np.nan,
-    }
-
-
-def _data(cfg, model, x0_true, x0_est, P0, inputs) -> MonteCarloData:
-    runs, seed = int(cfg.runs), int(cfg.seed)
-    streams = run_streams(seed, runs)
-    x, z = _simulate(model, x0_true, inputs, streams)
-    K1 = inputs.shape[1]
-    time = np.arange(K1) * float(cfg.sample_period)
-    empty = np.zeros((runs, K1, 0))
-    labels = simulation_labels(cfg)
-    estimator_seeds = run_seed_sequences(seed, runs)["estimator"]
-    return MonteCarloData(model, time, x, empty, inputs, z, x0_est, P0, np.zeros((runs, 0)), estimator_seeds, labels)
-
-
-def build_linear_data(cfg) -> MonteCarloData:
-    """Monte Carlo data of ``model=linear``: the truth starts at ``initial_state``, each run's
-    initial estimate is drawn from N(truth, P0)."""
-    runs, K = int(cfg.runs), sample_count(cfg.duration, cfg.sample_period)
-    model = constant_velocity_model(cfg, runs)
-    std = np.array(list(cfg.model.initial_std))
-    P0 = initial_covariance(std, float(cfg.model.initial_correlation))
-    x0 = np.broadcast_to(np.array(list(cfg.model.initial_state), dtype=float), (runs, 4))
-    est = draw_initial_estimates(x0, P0, run_streams(int(cfg.seed), runs)["initial"])
-    return _data(cfg, model, x0, est, P0, np.zeros((runs, K + 1, 0)))
-
-
-def build_ungm_data(cfg) -> MonteCarloData:
-    """Monte Carlo data of ``model=ungm``: the truth starts from N(x0_mean, x0_var) (deterministic
-    when ``x0_var`` is 0), every filter from (m0, P0)."""
-    runs, K = int(cfg.runs), sample_count(cfg.duration, cfg.sample_period)
-    m = cfg.model
-    model = UNGMModel(float(m.Q), float(m.R), float(cfg.sample_period), runs)
-    x0 = float(m.x0_mean) + np.sqrt(float(m.x0_var)) * np.array(
-        [rng.standard_normal(1) for rng in run_streams(int(cfg.seed), runs)["start"]]
-    )
-    inputs = np.broadcast_to(np.arange(K + 1, dtype=float)[None, :, None], (runs, K + 1, 1)).copy()
-    est = np.full((runs, 1), float(m.m0))
-    return _data(cfg, model, x0, est, np.array([[float(m.P0)]]), inputs)

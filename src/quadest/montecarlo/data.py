@@ -7,15 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quadest.models.base import FilterModel
-
-
-@dataclass(frozen=True)
-class SensorRecord:
-    """The samples of one further sensor: ``values`` (B, K+1, m_s) and ``available`` (K+1,) bool
-    (its rate, dropouts). The model's ``sensors[name]`` describes how the filters use it."""
-
-    values: np.ndarray
-    available: np.ndarray
+from quadest.sensors.record import SensorRecord
 
 
 @dataclass

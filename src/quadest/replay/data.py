@@ -18,13 +18,13 @@ aligned log (:mod:`quadest.replay.align`), in PX4's frames (body FRD, earth NED)
   Model lookup gives when the position is known; the log has none, so it comes from the data;
 - noise from the configured sensor (``sensor=consumer`` is the MPU-6000 class of the PX4 board)
   and the model's magnetometer, process-noise and initial-uncertainty settings, with the same
-  formulas as ``model=attitude`` (:mod:`quadest.models.attitude_data`); the sensor's deterministic
+  formulas as ``model=attitude`` (:mod:`quadest.simulation.attitude_data`); the sensor's deterministic
   errors are not modelled (PX4 applies its own calibration before logging);
 - initial estimate from the first samples alone (roll and pitch from the accelerometer, yaw from
   the magnetometer; zero biases), never from PX4's estimate;
 - ``truth``: PX4's attitude as a filter state with zero biases (PX4 does not log its bias
   estimates). It is a *reference*, labelled ``reference: PX4 onboard
-  estimate``; only its attitude is compared (:mod:`quadest.replay.report`).
+  estimate``; only its attitude is compared (:mod:`quadest.app.replay_report`).
 """
 
 from __future__ import annotations
@@ -39,12 +39,12 @@ from quadest.errors import ConfigError
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.quadrotor_config import triad_spec
 from quadest.montecarlo import MonteCarloData
-from quadest.montecarlo.data import SensorRecord
 from quadest.montecarlo.streams import run_seed_sequences
 from quadest.numerics import quaternion as quat
 from quadest.replay.align import AlignedLog, align
 from quadest.replay.ulog import read_flight_log
 from quadest.sensors.mimu import TriadSpec
+from quadest.sensors.record import SensorRecord
 
 REFERENCE = "PX4 onboard estimate"
 GAUSS_TO_MICROTESLA = 100.0
@@ -65,7 +65,7 @@ def log_path(cfg) -> Path:
 
 
 def validate_replay(cfg) -> None:
-    """Checks of a replay's settings, before any work (called by :func:`quadest.config.validate.validate`)."""
+    """Checks of a replay's settings, before any work (called by :func:`quadest.app.validate.validate`)."""
     if cfg.model.name != "attitude":
         raise ConfigError("model.name", cfg.model.name, "'attitude' for a log replay (source.name=px4)")
     if cfg.runs != 1:
@@ -118,7 +118,7 @@ def replay_noise(
     cfg, T: float, mag_period: float, duration: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``Q`` (9, 9) per step, ``R_acc``, ``R_mag`` (3, 3) and ``P0`` (9, 9), by the formulas of
-    ``model=attitude`` without aiding (module docstring of :mod:`quadest.models.attitude_data`)."""
+    ``model=attitude`` without aiding (module docstring of :mod:`quadest.simulation.attitude_data`)."""
     m, scale = cfg.model, float(cfg.sensor.error_scale)
     accel, gyro = triad_spec(cfg.sensor.accel, scale), triad_spec(cfg.sensor.gyro, scale)
     mag = TriadSpec(

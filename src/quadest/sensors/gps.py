@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadest.montecarlo.data import SensorRecord
 from quadest.sensors.magnetometer import sample_stride
 from quadest.sensors.noise_laws import NoiseLaw, draw_noise
+from quadest.sensors.record import SensorRecord
 
 
 @dataclass

@@ -24,9 +24,9 @@ from __future__ import annotations
 import numpy as np
 
 from quadest.errors import ConfigError
-from quadest.montecarlo.data import SensorRecord
 from quadest.numerics import quaternion as quat
 from quadest.sensors.mimu import TriadErrors, TriadSpec, measure_triad
+from quadest.sensors.record import SensorRecord
 
 
 def field_in_body(q: np.ndarray, mag_earth: np.ndarray) -> np.ndarray:

@@ -44,10 +44,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadest.montecarlo.data import SensorRecord
 from quadest.numerics import quaternion as quat
 from quadest.sensors.magnetometer import sample_stride
 from quadest.sensors.noise_laws import NoiseLaw, draw_noise
+from quadest.sensors.record import SensorRecord
 
 KINDS = ("pixel", "bearing", "line_of_sight")
 ROWS = {"pixel": 2, "bearing": 2, "line_of_sight": 3}  # measurement rows per beacon

@@ -12,12 +12,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from quadest.consistency import chi2_band
+from quadest.evaluation.consistency import chi2_band
+from quadest.evaluation.pcrlb import pcrlb_is_bound
 from quadest.models.attitude_figures import plot_attitude_errors, plot_bias_estimates
 from quadest.models.base import FilterModel
 from quadest.montecarlo import MonteCarloData
-from quadest.pcrlb import pcrlb_is_bound
-from quadest.runner import EstimatorResult
+from quadest.montecarlo.results import EstimatorResult
 
 
 def _save(fig: plt.Figure, title: str, path: Path) -> Path:

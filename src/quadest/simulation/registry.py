@@ -5,7 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from quadest.config.schema import (
+from quadest.models.config_checks import validate_linear, validate_quadrotor, validate_ungm
+from quadest.models.quadrotor import QuadrotorFilterModel
+from quadest.models.schemas import (
     AttitudeModelConf,
     InsModelConf,
     LinearModelConf,
@@ -15,16 +17,17 @@ from quadest.config.schema import (
     UNGMModelConf,
     UPFBenchmarkModelConf,
 )
-from quadest.models.attitude_data import build_attitude_data, validate_attitude
-from quadest.models.config_checks import validate_linear, validate_quadrotor, validate_ungm
-from quadest.models.ins_data import build_ins_data, validate_ins
-from quadest.models.quadrotor import QuadrotorFilterModel
-from quadest.models.quadrotor_data import build_quadrotor_data
-from quadest.models.seed001_rates import build_seed001_rates_data, validate_seed001_rates
-from quadest.models.seed003_attitude import build_seed003_attitude_data, validate_seed003_attitude
-from quadest.models.upf_benchmark import build_upf_benchmark_data, validate_upf_benchmark
-from quadest.models.validation import build_linear_data, build_ungm_data
+from quadest.models.seed001_rates import validate_seed001_rates
+from quadest.models.seed003_attitude import validate_seed003_attitude
+from quadest.models.upf_benchmark import validate_upf_benchmark
 from quadest.montecarlo import MonteCarloData
+from quadest.simulation.attitude_data import build_attitude_data, validate_attitude
+from quadest.simulation.ins_data import build_ins_data, validate_ins
+from quadest.simulation.quadrotor_data import build_quadrotor_data
+from quadest.simulation.seed001_rates_data import build_seed001_rates_data
+from quadest.simulation.seed003_attitude_data import build_seed003_attitude_data
+from quadest.simulation.upf_benchmark_data import build_upf_benchmark_data
+from quadest.simulation.validation_data import build_linear_data, build_ungm_data
 
 
 @dataclass(frozen=True)

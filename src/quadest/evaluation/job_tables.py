@@ -1,6 +1,6 @@
 """The metric tables and ``summary.json`` entries every job writes (``docs/outputs.md``): the
-open-loop job (:mod:`quadest.job`), the closed loop (:mod:`quadest.closed_loop.job`) and the
-flight-log replay (:mod:`quadest.replay.report`) share them."""
+open-loop job (:mod:`quadest.app.job`), the closed loop (:mod:`quadest.closed_loop.job`) and the
+flight-log replay (:mod:`quadest.app.replay_report`) share them."""
 
 from __future__ import annotations
 
@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from quadest.formatting import markdown_table
-from quadest.metrics import estimator_overview, floor_table, rmse_table, summarize, tidy_metrics
+from quadest.evaluation.formatting import markdown_table
+from quadest.evaluation.metrics import estimator_overview, floor_table, rmse_table, summarize, tidy_metrics
+from quadest.evaluation.paired import paired_comparison, paired_markdown
 from quadest.montecarlo import MonteCarloData
-from quadest.paired import paired_comparison, paired_markdown
-from quadest.runner import EstimatorResult
+from quadest.montecarlo.results import EstimatorResult
 
 OVERVIEW_KEYS = ("mean_nees", "nees_in_band", "mean_nis", "nis_in_band", "step_time_us")
-"""Columns of :func:`quadest.metrics.estimator_overview` that go into each estimator's summary."""
+"""Columns of :func:`quadest.evaluation.metrics.estimator_overview` that go into each estimator's summary."""
 
 
 @dataclass

@@ -19,9 +19,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from quadest.consistency import fraction_inside
+from quadest.evaluation.consistency import fraction_inside
 from quadest.montecarlo import MonteCarloData
-from quadest.runner import EstimatorResult
+from quadest.montecarlo.results import EstimatorResult
 
 
 def parameter_columns(estimator_params: dict[str, dict]) -> list[str]:

@@ -1,9 +1,9 @@
 """Monte Carlo data of ``model=ins``: fly the shared quadrotor, measure it with the MIMU and the
 aiding sensors, and bind :class:`~quadest.models.ins.InsFilterModel` to the runs (docs/ins.md).
 
-- Truth: :func:`~quadest.models.quadrotor_data.fly_scenario`; the attitude as a quaternion of
+- Truth: :func:`~quadest.simulation.quadrotor_data.fly_scenario`; the attitude as a quaternion of
   the truth's ZYX Euler angles; the true biases are each run's turn-on bias plus its random-walk
-  drift (:func:`quadest.models.attitude_data._measure_with_truth_bias`).
+  drift (:func:`quadest.simulation.attitude_data._measure_with_truth_bias`).
 - IMU (the input): the MIMU of ``cfg.sensor`` with its own streams (so adding an aiding sensor
   changes no MIMU draw) measuring, at each sample, the mean of the true rate and specific force
   over the step that follows (trapezoid of the truth's samples: a Δθ/Δv IMU).
@@ -29,14 +29,11 @@ from omegaconf import OmegaConf
 
 from quadest.config.ranges import require_non_negative, require_positive
 from quadest.errors import ConfigError
-from quadest.models.attitude_data import _measure_with_truth_bias
 from quadest.models.config_checks import validate_quadrotor
 from quadest.models.ins import CHARTS, InsFilterModel
 from quadest.models.ins_sensors import AidingSensor, BarometerAiding, GpsAiding, MagnetometerAiding, VisionAiding
 from quadest.models.quadrotor_config import triad_spec
-from quadest.models.quadrotor_data import fly_scenario
 from quadest.montecarlo import MonteCarloData
-from quadest.montecarlo.data import SensorRecord
 from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.quadrotor.scenarios import PlatformApproach
@@ -45,7 +42,10 @@ from quadest.sensors.gps import measure_gps
 from quadest.sensors.magnetometer import measure_magnetometer, sample_stride
 from quadest.sensors.mimu import TriadErrors, draw_triad_errors
 from quadest.sensors.noise_laws import check_noise_law, noise_law_from_config
+from quadest.sensors.record import SensorRecord
 from quadest.sensors.vision import KINDS, MOUNTS, measure_vision, mount_rotation
+from quadest.simulation.attitude_data import _measure_with_truth_bias
+from quadest.simulation.quadrotor_data import fly_scenario
 
 AIDING = ("gps", "barometer", "vision", "magnetometer")
 

@@ -17,28 +17,29 @@ import numpy as np
 from omegaconf import OmegaConf
 from tqdm.auto import tqdm
 
+from quadest.app.replay_report import write_replay_outputs
+from quadest.app.validate import validate
 from quadest.cache.keys import code_version
 from quadest.cache.lookup import JobCache
 from quadest.closed_loop.job import run_closed_loop_job
-from quadest.config.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator, estimator_parameters, resolve
-from quadest.formatting import strict_json
-from quadest.job_tables import estimator_entries, write_metric_tables
-from quadest.metrics import convergence_table
-from quadest.models.registry import build_data
-from quadest.montecarlo import MonteCarloData
-from quadest.paired import summary_lines
-from quadest.pcrlb import pcrlb_variances
-from quadest.plotting import (
+from quadest.evaluation.formatting import strict_json
+from quadest.evaluation.job_tables import estimator_entries, write_metric_tables
+from quadest.evaluation.metrics import convergence_table
+from quadest.evaluation.paired import summary_lines
+from quadest.evaluation.pcrlb import pcrlb_variances
+from quadest.evaluation.plotting import (
     plot_consistency,
     plot_errors,
     plot_extra_figures,
     plot_rmse_vs_time,
     plot_truth_vs_estimate,
 )
-from quadest.replay.report import write_replay_outputs
-from quadest.runner import EstimatorResult, run_estimator
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.results import EstimatorResult, failed_result
+from quadest.runner import run_estimator
+from quadest.simulation.registry import build_data
 
 SCHEMA_VERSION = 1
 
@@ -67,22 +68,6 @@ def provenance() -> dict:
     status = _git("status", "--porcelain", "--untracked-files=no", "--", ":/src", ":/conf", ":/experiments")
     return {"commit": git_commit(), "commit_dirty": None if status is None else bool(status),
             "code_version": code_version()}  # fmt: skip
-
-
-def failed_result(name: str, data: MonteCarloData, reason: str) -> EstimatorResult:
-    """The result of an estimator that could not run at all: every run flagged with ``reason``."""
-    B, K1, n = data.truth.shape
-    nc = data.companion_truth.shape[-1]
-    nan = np.full(B, np.nan)
-    return EstimatorResult(
-        name=name, sq_error_sum=np.full((B, n), np.nan), companion_sq_error_sum=np.full((B, nc), np.nan),
-        steps=np.zeros(B), nees_sum=nan, nis_sum=nan.copy(), nees_mean_t=np.full(K1, np.nan),
-        nis_mean_t=np.full(K1, np.nan), sq_error_t=np.zeros((K1, n)), alive_t=np.zeros(K1),
-        diverged=np.ones(B, dtype=bool), diverged_step=np.zeros(B, dtype=int), reasons=dict.fromkeys(range(B), reason),
-        step_time_us=float("nan"), derived_sq_error_sum=np.full((B, len(data.model.derived_error_names)), np.nan),
-        saved={"estimate": np.full((0, K1, n), np.nan), "std": np.full((0, K1, n), np.nan),
-               "companion": np.full((0, K1, nc), np.nan)},
-    )  # fmt: skip
 
 
 def resolve_workers(requested: int, estimators: int) -> int:
@@ -172,7 +157,7 @@ def run_job(cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     validate(cfg)
     if cfg.loop != "open":  # the controller flies on truth, noisy states or each estimate: docs/closed-loop.md
         header = {"schema_version": SCHEMA_VERSION, **provenance()}
-        return run_closed_loop_job(cfg, out_dir, overrides, header, failed_result)
+        return run_closed_loop_job(cfg, out_dir, overrides, header)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))

@@ -1,7 +1,7 @@
 """Monte Carlo data of ``model=attitude``: fly the shared quadrotor, measure it with the MIMU and
 the magnetometer, and bind :class:`~quadest.models.attitude.AttitudeFilterModel` to the runs.
 
-- Truth: :func:`~quadest.models.quadrotor_data.fly_scenario` (earth frame z up, ZYX Euler
+- Truth: :func:`~quadest.simulation.quadrotor_data.fly_scenario` (earth frame z up, ZYX Euler
   angles in the 16-state truth, columns 6:9); the true biases are each run's turn-on bias plus its
   random-walk drift (recovered by measuring the same draws once more without white noise).
 - Input: the gyro sample and, with ``known_acceleration``, the true earth-frame acceleration
@@ -29,7 +29,6 @@ from quadest.errors import ConfigError
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.config_checks import validate_quadrotor
 from quadest.models.quadrotor_config import triad_spec
-from quadest.models.quadrotor_data import fly_scenario
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
@@ -37,6 +36,7 @@ from quadest.quadrotor.kinematics import rotation
 from quadest.sensors.magnetometer import measure_magnetometer, sample_stride
 from quadest.sensors.mimu import TriadErrors, TriadSpec, draw_triad_errors, measure_triad
 from quadest.sensors.noise_laws import noise_law_from_config
+from quadest.simulation.quadrotor_data import fly_scenario
 
 
 def _measure_with_truth_bias(spec: TriadSpec, errors: TriadErrors, y: np.ndarray, T: float, rngs, law):

@@ -27,14 +27,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from quadest.formatting import markdown_table, strict_json
-from quadest.job_tables import MetricTables, estimator_entries
-from quadest.metrics import estimator_overview, parameter_columns, summarize
+from quadest.evaluation.formatting import markdown_table, strict_json
+from quadest.evaluation.job_tables import MetricTables, estimator_entries
+from quadest.evaluation.metrics import estimator_overview, parameter_columns, summarize
+from quadest.evaluation.paired import paired_comparison, paired_markdown, summary_lines
 from quadest.models.attitude_figures import attitude_errors_deg
 from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.results import EstimatorResult
 from quadest.numerics import quaternion as quat
-from quadest.paired import paired_comparison, paired_markdown, summary_lines
-from quadest.runner import EstimatorResult
 
 ANGLES = ("roll", "pitch", "yaw")
 QUANTITY = "difference to PX4"

@@ -2,23 +2,23 @@
 
 Each failed check raises :class:`~quadest.errors.ConfigError` with one line naming the key, the
 value and what is allowed. Types and unknown keys are already checked by the schemas at
-composition, except keys added with ``+``, which :func:`~quadest.config.schema.check_known_keys`
+composition, except keys added with ``+``, which :func:`~quadest.app.schema.check_known_keys`
 rejects here.
 """
 
 from __future__ import annotations
 
+from quadest.app.schema import check_known_keys
 from quadest.cache.location import validate_cache
 from quadest.config.ranges import require_non_negative, require_positive
-from quadest.config.schema import check_known_keys
 from quadest.errors import ConfigError
 from quadest.estimators.params import parameter_problem
 from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
-from quadest.models.registry import model_specs, state_dimension
 from quadest.numerics.square_root import requested_kernels
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import validate_replay
 from quadest.sensors.noise_laws import check_noise_law
+from quadest.simulation.registry import model_specs, state_dimension
 
 
 def validate_run(cfg) -> None:

@@ -1,28 +1,15 @@
-"""Structured-config schemas: every config node has a dataclass, so that a misspelled key or a
-value of the wrong type fails when Hydra composes the config, before any work starts.
+"""Structured-config schemas of the ``model`` group: one dataclass per ``model=`` option.
 
-The tree mirrors the package: ``model/`` (:mod:`quadest.models`), ``sensor/``
-(:mod:`quadest.sensors`), ``scenario/`` (:mod:`quadest.quadrotor.scenarios`), ``estimator/``
-(:mod:`quadest.estimators`). Each YAML option pulls its schema from ``/schema/<group>/<name>``.
+Each option's schema sits beside its filter model and data builder in the model registry
+(:mod:`quadest.simulation.registry`); :func:`quadest.app.schema.register_schemas` stores them
+under ``/schema/model/<name>``, where the YAML options pull them from.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
 
-from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING, DictConfig, OmegaConf
-
-from quadest.closed_loop.config import ClosedLoopConf
-from quadest.errors import ConfigError
-from quadest.quadrotor.scenarios import SCENARIOS
-from quadest.sensors.barometer import BarometerSpec
-from quadest.sensors.gps import GPSSpec
 from quadest.sensors.mimu import TriadSpec
-from quadest.sensors.noise_laws import NoiseLaw
-from quadest.sensors.vision import VisionSpec
 
 
 @dataclass
@@ -109,144 +96,6 @@ class UNGMModelConf:
     x0_var: float = 0.0
     m0: float = 0.1
     P0: float = 1.0
-
-
-@dataclass
-class EncoderConf:
-    """Rotor encoders: lines per revolution (0: no quantisation) and white noise (rad/s)."""
-
-    lines: int = 256
-    noise_std: float = 0.0
-
-
-@dataclass
-class TriadConf(TriadSpec):
-    """``sensor.accel`` / ``sensor.gyro``: the error levels and the law of the white noise."""
-
-    noise_law: NoiseLaw = field(default_factory=NoiseLaw)
-
-
-@dataclass
-class SensorConf:
-    """``sensor=ideal|tactical|consumer``; ``error_scale`` multiplies every MIMU error term."""
-
-    name: str = MISSING
-    error_scale: float = 1.0
-    accel: TriadConf = field(default_factory=TriadConf)
-    gyro: TriadConf = field(default_factory=TriadConf)
-    encoder: EncoderConf = field(default_factory=EncoderConf)
-    gps: GPSSpec = field(default_factory=GPSSpec)  # navigation sensors (model=ins): conf/sensor/gps/ ...
-    barometer: BarometerSpec = field(default_factory=BarometerSpec)
-    vision: VisionSpec = field(default_factory=VisionSpec)
-
-
-@dataclass
-class OutputConf:
-    """What a job writes besides the metrics: time series of the first ``saved_runs`` runs and
-    figures of run 0 (with ``per_estimator_figures``, also truth vs estimate per estimator)."""
-
-    saved_runs: int = 3
-    figures: bool = True
-    per_estimator_figures: bool = False
-
-
-@dataclass
-class ObjectiveConf:
-    """What a tuning sweep minimises (:mod:`quadest.objective`): the mean log-RMSE of the filter
-    states of ``estimator`` plus ``nees_penalty`` times the fraction of steps with NEES outside its
-    95 % band. With ``estimator`` set, the task returns it (Hydra's Optuna sweeper reads that)."""
-
-    estimator: str | None = None  # None: no objective
-    nees_penalty: float = 1.0
-
-
-@dataclass
-class CacheConf:
-    """The result cache (:mod:`quadest.cache`, docs/cache.md): ``dir`` null means
-    ``$QUADEST_CACHE_DIR``, else ``~/.cache/quadest``."""
-
-    enabled: bool = True
-    dir: str | None = None
-
-
-@dataclass
-class SourceConf:
-    """``source``: a recorded flight log replayed instead of the simulation (docs/replay.md; null:
-    simulate). ``path`` null is the shipped PX4 log; ``start`` skips seconds of the log;
-    differences to the log's reference count from ``warmup`` seconds after the start."""
-
-    name: str = "px4"
-    path: str | None = None
-    start: float = 0.0
-    warmup: float = 5.0
-
-
-@dataclass
-class ExperimentConf:
-    """The root config: Monte Carlo settings plus the four groups."""
-
-    runs: int = 50
-    seed: int = 2026
-    duration: float = 20.0
-    sample_period: float = 0.01
-    divergence_bound: float = 50.0
-    progress: bool = True
-    workers: int = 0
-    model: Any = MISSING
-    sensor: SensorConf = MISSING
-    scenario: Any = MISSING
-    estimator: dict[str, Any] = field(default_factory=dict)
-    output: OutputConf = field(default_factory=OutputConf)
-    sweep: dict[str, Any] = field(default_factory=dict)  # values a sweep varies and configs interpolate
-    objective: ObjectiveConf = field(default_factory=ObjectiveConf)  # set by conf/hparams_search/
-    cache: CacheConf = field(default_factory=CacheConf)
-    loop: str = "open"  # open | truth | measured | estimate: what the controller flies on (docs/closed-loop.md)
-    closed_loop: ClosedLoopConf = field(default_factory=ClosedLoopConf)
-    source: SourceConf | None = None  # a flight log instead of the simulation (conf/experiment/px4_replay.yaml)
-
-
-def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:
-    """Raise :class:`ConfigError` naming the first key of a schema-typed node that its schema does
-    not declare.
-
-    Hydra composes the root in struct mode, so ``bogus_key=1`` already fails, but an override with
-    ``+`` (``+bogus_key=1``) is added by design in an open dict and survives composition. Nodes
-    without a dataclass schema (``estimator``, ``sweep``, a plugin's free-form node) may hold any
-    key; their typed children are still checked.
-    """
-    schema = OmegaConf.get_type(cfg)
-    declared = {f.name for f in dataclasses.fields(schema)} if dataclasses.is_dataclass(schema) else None
-    for key in cfg.keys():
-        child = cfg._get_node(key)
-        if declared is not None and key not in declared:
-            raise ConfigError(
-                f"{prefix}{key}",
-                child._value(),
-                f"not a key of {schema.__name__}; allowed keys: {', '.join(sorted(declared))}",
-            )
-        if isinstance(child, DictConfig):
-            check_known_keys(child, f"{prefix}{key}.")
-
-
-def register_schemas() -> None:
-    """Store every schema in Hydra's ConfigStore (idempotent)."""
-    from quadest.estimators.registry import builtin_estimators
-
-    cs = ConfigStore.instance()
-    cs.store(name="experiment_schema", node=ExperimentConf)
-    cs.store(group="schema/model", name="quadrotor", node=QuadrotorModelConf)
-    cs.store(group="schema/model", name="linear", node=LinearModelConf)
-    cs.store(group="schema/model", name="ungm", node=UNGMModelConf)
-    cs.store(group="schema/model", name="upf_benchmark", node=UPFBenchmarkModelConf)
-    cs.store(group="schema/model", name="seed001_rates", node=Seed001RatesModelConf)
-    cs.store(group="schema/model", name="seed003_attitude", node=Seed003AttitudeModelConf)
-    cs.store(group="schema/model", name="attitude", node=AttitudeModelConf)
-    cs.store(group="schema/model", name="ins", node=InsModelConf)
-    cs.store(group="schema/sensor", name="sensor", node=SensorConf)
-    for name, cls in SCENARIOS.items():
-        cs.store(group="schema/scenario", name=name, node=cls)
-    for name, spec in builtin_estimators().items():
-        cs.store(group="schema/estimator", name=name, node=spec.params)
 
 
 @dataclass

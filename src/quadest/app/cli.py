@@ -22,15 +22,15 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
+from quadest.app.job import run_job
+from quadest.app.schema import register_schemas
+from quadest.app.validate import validate
 from quadest.config.paths import config_dir
-from quadest.config.schema import register_schemas
-from quadest.config.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import discover
-from quadest.formatting import strict_json
-from quadest.job import run_job
-from quadest.objective import objective_value, validate_objective
-from quadest.pcrlb import pcrlb_caption
+from quadest.evaluation.formatting import strict_json
+from quadest.evaluation.objective import objective_value, validate_objective
+from quadest.evaluation.pcrlb import pcrlb_caption
 
 register_schemas()
 

@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from quadest.formatting import markdown_table
+from quadest.evaluation.formatting import markdown_table
 
 ROUND_OFF = 1e-6
 SIGNIFICANCE = 0.05

@@ -1,0 +1,41 @@
+"""Monte Carlo data of ``model=upf_benchmark`` (:mod:`quadest.models.upf_benchmark`): the truth
+driven by Gamma increments, the measurements with Gaussian noise, every run from the known start."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from quadest.models.upf_benchmark import UPFBenchmarkModel
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.data import sample_count
+from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.simulation.validation_data import simulation_labels
+
+
+def build_upf_benchmark_data(cfg) -> MonteCarloData:
+    """Truth and measurements of ``model=upf_benchmark``: every run starts at ``x0`` (known
+    exactly); the Gamma increments come from the ``process`` stream, the measurement noise from
+    the ``measurement`` stream of each run; every filter starts from (x0, P0)."""
+    runs, seed, K = int(cfg.runs), int(cfg.seed), sample_count(cfg.duration, cfg.sample_period)
+    m = cfg.model
+    model = UPFBenchmarkModel(
+        float(m.Q), float(m.R), float(m.gamma_shape), float(m.gamma_rate), float(m.switch_time),
+        float(cfg.sample_period), runs,
+    )  # fmt: skip
+    streams = run_streams(seed, runs)
+    inputs = np.broadcast_to(np.arange(1.0, K + 2.0)[None, :, None], (runs, K + 1, 1)).copy()
+    v = np.stack([model.sample_process_noise(rng, (K + 1,)) for rng in streams["process"]])
+    n = np.stack([rng.standard_normal((K + 1, 1)) for rng in streams["measurement"]]) * math.sqrt(float(m.R))
+    x = np.empty((runs, K + 1, 1))
+    x[:, 0] = float(m.x0)
+    for k in range(1, K + 1):
+        x[:, k] = model.f(x[:, k - 1][:, None], inputs[:, k - 1])[:, 0] + v[:, k]
+    z = np.concatenate([model.h(x[:, k][:, None], inputs[:, k]) for k in range(K + 1)], axis=1) + n
+    labels = simulation_labels(cfg)
+    return MonteCarloData(
+        model, np.arange(K + 1) * float(cfg.sample_period), x, np.zeros((runs, K + 1, 0)), inputs, z,
+        np.full((runs, 1), float(m.x0)), np.array([[float(m.P0)]]), np.zeros((runs, 0)),
+        run_seed_sequences(seed, runs)["estimator"], labels,
+    )  # fmt: skip
