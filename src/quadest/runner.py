@@ -18,6 +18,16 @@ same seeds for every estimator (common random numbers).
 Full covariance histories are never stored; estimates and standard deviations are kept only for
 the first ``saved_runs`` runs (for figures and time series).
 
+With a smoother (``estimator.<label>.smoother``, :mod:`quadest.estimators.smoother_settings`)
+the filter also keeps its smoother steps (Gaussian) or weighted clouds (particle filters); after
+the last step the backward pass runs (:mod:`quadest.estimators.smoothing`,
+:mod:`quadest.estimators.particle_smoothing`) and its estimates are scored by a second tracker,
+exactly as a filter's are (errors, NEES with the smoothed covariance, saved series), as the
+result ``<label>+smoothed`` (fixed interval) or ``<label>+lag<L>`` (fixed lag) in
+:attr:`EstimatorResult.smoothed`. A run the filter lost is left out of the smoothed result
+entirely. Memory: the K transitions' gains and residuals, ``2 K B n² `` floats (the particle
+smoother: the K clouds).
+
 A run is flagged as diverged when the estimator flags it (failed factorisation, non-finite
 numbers, an exception in a single-run plugin), when any state error exceeds
 ``divergence_bound``, or when its covariance is not positive definite. For an estimator whose
@@ -29,12 +39,15 @@ covariance makes that step's NEES unavailable instead (left out of the NEES aver
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from quadest.estimators.base import Estimator
+from quadest.estimators.particle_smoothing import ffbsi
+from quadest.estimators.smoother_settings import SmootherSettings
+from quadest.estimators.smoothing import fixed_lag, rts_backward
 from quadest.models.base import FilterModel
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
@@ -217,6 +230,102 @@ class EstimatorTracker:
         )  # fmt: skip
 
 
+class _Replay(Estimator):
+    """Plays stored estimates back through an :class:`EstimatorTracker`: ``initialize`` shows step 0,
+    each primary ``update`` the next step (a smoother's estimates, scored like a filter's)."""
+
+    def __init__(self, model: FilterModel, means: np.ndarray, spreads: np.ndarray, capabilities: frozenset[str]):
+        super().__init__(model)
+        self.means, self.spreads, self.k = means, spreads, 0
+        self.capabilities = capabilities  # type: ignore[misc]
+
+    def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
+        self.k = 0
+        self._reset_failures(x0.shape[0])
+
+    def predict(self, u: np.ndarray) -> None:
+        return None
+
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        if sensor is None:
+            self.k += 1
+
+    @property
+    def mean(self) -> np.ndarray:
+        return self.means[self.k]
+
+    @property
+    def covariance(self) -> np.ndarray:
+        S = self.spreads[self.k]
+        return S @ np.swapaxes(S, -1, -2) if "sqrt_covariance" in self.capabilities else S
+
+    @property
+    def sqrt_covariance(self) -> np.ndarray:
+        return self.spreads[self.k]
+
+
+class SmoothingRecorder:
+    """Keeps what the backward pass needs while a filter runs forward: for a Gaussian filter the
+    filtered means (and spreads, for a fixed lag) of steps 0..K and the K smoother steps; for a
+    particle filter the K weighted clouds and the initial moments."""
+
+    def __init__(self, est: Estimator, settings: SmootherSettings) -> None:
+        self.est, self.settings = est, settings
+        self.particles = "particle_smoothing" in est.capabilities
+        self.square_root = "sqrt_covariance" in est.capabilities
+        est.smoothing = True
+        self.means: list[np.ndarray] = []
+        self.spreads: list[np.ndarray] = []
+        self.steps: list = []
+        self.clouds: list = []
+
+    def _spread(self) -> np.ndarray:
+        return (self.est.sqrt_covariance if self.square_root else self.est.covariance).copy()
+
+    def start(self) -> None:
+        """After ``initialize``: step 0."""
+        self.means.append(self.est.mean.copy())
+        self.spreads.append(self._spread())
+
+    def record(self) -> None:
+        """After the updates of step k ≥ 1."""
+        if self.particles:
+            self.clouds.append(self.est.smoother_cloud)
+            return
+        self.steps.append(self.est.smoother_step)
+        self.means.append(self.est.mean.copy())
+        if self.settings.kind == "fixed_lag":
+            self.spreads.append(self._spread())
+        else:
+            self.spreads[-1:] = [self._spread()]  # only the last is needed
+
+    def smooth(self, model: FilterModel, start: FilterStart) -> tuple[np.ndarray, np.ndarray, frozenset[str]]:
+        """Smoothed means (K+1, B, n), spreads (K+1, B, n, n) and the capabilities of their replay."""
+        if self.particles:
+            rngs = [np.random.default_rng(smoother_seed(seed)) for seed in start.estimator_seeds]
+            means, covs = ffbsi(self.clouds, model, rngs, self.settings.trajectories)
+            return (
+                np.concatenate([self.means[0][None], means]),
+                np.concatenate([self.spreads[0][None], covs]),
+                frozenset({"cloud"}),
+            )
+        form = self.est.smoothing_form()
+        if self.settings.kind == "fixed_lag":
+            means, spreads = fixed_lag(self.means, self.spreads, self.steps, form, self.settings.lag)
+        else:
+            means, spreads = rts_backward(self.means, self.spreads[-1], self.steps, form)
+        return means, spreads, frozenset({"sqrt_covariance"} if form.square_root else ())
+
+
+SMOOTHER_STREAM = 7  # the particle smoother's draws: a child of each run's estimator stream
+
+
+def smoother_seed(seed: np.random.SeedSequence) -> np.random.SeedSequence:
+    """The seed of a run's particle-smoother draws: a fixed child of the run's estimator seed, the
+    same for every estimator (common random numbers) and whatever else has been spawned."""
+    return np.random.SeedSequence(seed.entropy, spawn_key=(*seed.spawn_key, SMOOTHER_STREAM))
+
+
 def run_estimator(
     name: str,
     est: Estimator,
@@ -225,15 +334,20 @@ def run_estimator(
     saved_runs: int = 0,
     progress: bool = False,
     crashes: tuple[np.ndarray, dict[int, str]] | None = None,
+    smoother: SmootherSettings | None = None,
 ) -> EstimatorResult:
-    """Filter every run of ``data`` with ``est`` and accumulate the metrics.
+    """Filter every run of ``data`` with ``est`` and accumulate the metrics; with ``smoother``, also
+    smooth and score the smoothed estimates (:attr:`EstimatorResult.smoothed`).
 
     ``crashes`` = (crash step (B,), −1 for none; run → reason) ends the runs of a closed-loop
     flight that crashed: each is flagged at the sample after its crash and stops counting."""
+    recorder = SmoothingRecorder(est, smoother) if smoother is not None else None
     tracker = EstimatorTracker(
         name, est, data.model, FilterStart.of(data), data.time.size - 1, divergence_bound, saved_runs,
         tuple(data.sensors),
     )  # fmt: skip
+    if recorder is not None:
+        recorder.start()
     bar = tqdm(
         total=tracker.K, desc=f"{name:>8s}", unit="step", disable=None if progress else True, leave=False,
         mininterval=0.5,
@@ -246,6 +360,34 @@ def run_estimator(
             k, data.inputs[:, k - 1], data.inputs[:, k], data.measurements[:, k], data.truth[:, k],
             data.companion_truth[:, k], further,
         )  # fmt: skip
+        if recorder is not None:
+            recorder.record()
         bar.update()
     bar.close()
+    result = tracker.result()
+    if recorder is None:
+        return result
+    return replace(result, smoothed=_smoothed_result(result, recorder, data, divergence_bound, saved_runs))
+
+
+def _smoothed_result(
+    filtered: EstimatorResult, recorder: SmoothingRecorder, data: MonteCarloData, bound: float, saved_runs: int
+) -> EstimatorResult:
+    """The smoothed estimates of ``recorder`` scored against the data's truth, as a result named
+    ``<label>+smoothed`` / ``<label>+lag<L>``; its step time is the backward pass's."""
+    start = FilterStart.of(data)
+    t0 = time.perf_counter()
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        means, spreads, capabilities = recorder.smooth(data.model, start)
+    elapsed = time.perf_counter() - t0
+    replay = _Replay(data.model, means, spreads, capabilities)
+    tracker = EstimatorTracker(
+        filtered.name + recorder.settings.label_suffix, replay, data.model, start, data.time.size - 1, bound,
+        saved_runs, tuple(data.sensors),
+    )  # fmt: skip
+    tracker.flag(filtered.diverged, 1, lambda i: f"left out: the filter lost this run ({filtered.reasons.get(i, '')})")
+    for k in range(1, tracker.K + 1):
+        tracker.step(k, data.inputs[:, k - 1], data.inputs[:, k], data.measurements[:, k], data.truth[:, k],
+                     data.companion_truth[:, k])  # fmt: skip
+    tracker.elapsed = elapsed
     return tracker.result()

@@ -17,7 +17,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-RESERVED_KEYS = ("kind", "_target_")
+SMOOTHER_KEYS = ("smoother", "smoother_lag", "smoother_trajectories")  # quadest.estimators.smoother_settings
+RESERVED_KEYS = ("kind", "_target_", *SMOOTHER_KEYS)  # config keys that are not constructor parameters
 
 
 @dataclass(frozen=True)

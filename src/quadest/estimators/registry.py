@@ -30,6 +30,7 @@ from typing import Any
 from quadest.errors import ConfigError, PluginError
 from quadest.estimators.base import CAPABILITIES, Estimator, PerRunAdapter, SingleRunEstimator
 from quadest.estimators.params import RESERVED_KEYS
+from quadest.estimators.smoother_settings import with_smoother_keys
 from quadest.models.base import FilterModel
 
 ENTRY_POINT_GROUP = "quadest.estimators"
@@ -37,7 +38,9 @@ ENTRY_POINT_GROUP = "quadest.estimators"
 
 @dataclass(frozen=True)
 class EstimatorSpec:
-    """A registered estimator: its class, the dataclass of its parameters, and where it is from."""
+    """A registered estimator: its class, its config schema (the ``Params`` dataclass plus the
+    reserved smoother keys, :func:`~quadest.estimators.smoother_settings.with_smoother_keys`), and
+    where it is from."""
 
     name: str
     cls: type
@@ -73,7 +76,8 @@ def _builtin_specs() -> dict[str, EstimatorSpec]:
         for _, cls in inspect.getmembers(module, inspect.isclass):
             name = cls.__dict__.get("config_name")
             if cls.__module__ == module.__name__ and name and not contract_problems(cls):
-                specs[name] = EstimatorSpec(name, cls, cls.Params, f"{module.__name__}.{cls.__name__}")
+                source = f"{module.__name__}.{cls.__name__}"
+                specs[name] = EstimatorSpec(name, cls, with_smoother_keys(cls.Params), source)
     return specs
 
 
@@ -100,7 +104,7 @@ def discover() -> tuple[dict[str, EstimatorSpec], dict[str, str]]:
         if issues:
             problems[ep.name] = f"estimator plugin {where} does not meet the contract: {'; '.join(issues)}"
             continue
-        specs[ep.name] = EstimatorSpec(ep.name, cls, cls.Params, where)
+        specs[ep.name] = EstimatorSpec(ep.name, cls, with_smoother_keys(cls.Params), where)
     return specs, problems
 
 

@@ -36,6 +36,8 @@ class EstimatorResult:
         reasons: run → reason text.
         step_time_us: wall time of predict + update per step per run (batch time / B).
         saved: time series of the first runs: ``estimate``, ``std``, ``companion``.
+        smoothed: with a smoother, the smoothed estimates' result (another row of the tables,
+            named ``<label>+smoothed`` or ``<label>+lag<L>``); ``None`` otherwise.
         truth, companion_truth: the truth this estimator was scored against, first runs only
             (closed loop with the estimate fed back: each estimator flies its own truth; ``None``
             when the truth is the data's, shared by every estimator).
@@ -62,6 +64,7 @@ class EstimatorResult:
     truth: np.ndarray | None = None
     companion_truth: np.ndarray | None = None
     derived_sq_error_sum: np.ndarray | None = None
+    smoothed: EstimatorResult | None = None
 
     def _per_run(self, totals: np.ndarray, root: bool = False) -> np.ndarray:
         """Time averages of per-run sums (square-rooted for RMSE); NaN for diverged runs."""

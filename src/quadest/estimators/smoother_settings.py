@@ -1,0 +1,96 @@
+"""The smoother keys (``SMOOTHER_KEYS``) every estimator's config node takes, and their checks.
+
+``estimator.<label>.smoother``: ``none`` (default), ``fixed_interval`` (the whole run: the RTS /
+unscented RTS smoother of a Gaussian filter, forward-filtering backward-simulation for a particle
+filter) or ``fixed_lag`` (Gaussian filters only: each state given the measurements up to
+``smoother_lag`` samples later). ``smoother_trajectories`` is the number of backward trajectories
+of the particle smoother (cost ``O(N · M)`` per step). The keys are reserved: they are not the
+estimator's constructor parameters and not its parameter columns; the job reads them here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cache
+from typing import Any
+
+from quadest.errors import ConfigError
+from quadest.estimators.params import SMOOTHER_KEYS
+
+SMOOTHERS = ("none", "fixed_interval", "fixed_lag")
+DEFAULT_LAG = 10
+DEFAULT_TRAJECTORIES = 100
+
+
+@dataclass(frozen=True)
+class SmootherSettings:
+    """A requested smoother: ``kind`` (``fixed_interval`` or ``fixed_lag``), the lag in samples and
+    the particle smoother's number of backward trajectories."""
+
+    kind: str
+    lag: int = DEFAULT_LAG
+    trajectories: int = DEFAULT_TRAJECTORIES
+
+    @property
+    def label_suffix(self) -> str:
+        """What the smoothed row's name adds to the estimator's label: ``+smoothed`` for the
+        fixed interval, ``+lag<L>`` for a fixed lag."""
+        return "+smoothed" if self.kind == "fixed_interval" else f"+lag{self.lag}"
+
+
+def _count(key: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ConfigError(key, value, "an integer >= 1")
+    return int(value)
+
+
+def smoother_settings(label: str, node: Mapping[str, Any], cls: type) -> SmootherSettings | None:
+    """The smoother asked for by config node ``estimator.<label>`` of class ``cls``, or ``None``.
+
+    Raises:
+        ConfigError: an unknown smoother, a lag or trajectory count that is not a positive integer,
+            or a smoother the estimator cannot give (no smoothing capability; a fixed lag of a
+            particle filter).
+    """
+    kind = node.get("smoother", "none")
+    if kind is None:
+        kind = "none"
+    if kind not in SMOOTHERS:
+        raise ConfigError(f"estimator.{label}.smoother", kind, f"one of {list(SMOOTHERS)}")
+    lag = _count(f"estimator.{label}.smoother_lag", node.get("smoother_lag", DEFAULT_LAG))
+    trajectories = _count(
+        f"estimator.{label}.smoother_trajectories", node.get("smoother_trajectories", DEFAULT_TRAJECTORIES)
+    )
+    if kind == "none":
+        return None
+    capabilities = set(getattr(cls, "capabilities", frozenset()))
+    if "smoothing" not in capabilities and "particle_smoothing" not in capabilities:
+        raise ConfigError(
+            f"estimator.{label}.smoother",
+            kind,
+            "none: this estimator keeps no smoother steps (smoothers: mekf, hf, the sigma-point family, "
+            "the particle filters; docs/smoothers.md)",
+        )
+    if kind == "fixed_lag" and "smoothing" not in capabilities:
+        raise ConfigError(
+            f"estimator.{label}.smoother", kind, "fixed_interval or none: a particle filter's smoother is FFBSi"
+        )
+    return SmootherSettings(kind, lag, trajectories)
+
+
+@cache
+def with_smoother_keys(params: type) -> type:
+    """The config schema of an estimator: its ``Params`` dataclass plus the reserved smoother keys
+    (a subclass of the same name, so Hydra types the node and refuses unknown keys)."""
+    schema = dataclasses.make_dataclass(
+        params.__name__,
+        [
+            (key, type(default), dataclasses.field(default=default))
+            for key, default in zip(SMOOTHER_KEYS, ("none", DEFAULT_LAG, DEFAULT_TRAJECTORIES), strict=True)
+        ],
+        bases=(params,),
+    )
+    schema.__module__, schema.__qualname__ = params.__module__, params.__qualname__
+    return schema
