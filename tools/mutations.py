@@ -61,6 +61,8 @@ BANDS = "tests/test_consistency_bands.py::"
 ROUGHENING = "tests/test_roughening.py::"
 PARTICLE_KERNELS = "tests/test_particle_kernels.py::"
 STEPS = "tests/test_gaussian_steps.py::"
+SMOOTHERS = "tests/test_smoothers.py::"
+SMOOTHING_RUNS = "tests/test_smoothing_runs.py::"
 
 MUTATIONS = (
     Mutation(
@@ -231,8 +233,8 @@ MUTATIONS = (
     Mutation(
         "diagonal Gaussian noise drawn with the variance instead of the standard deviation",
         "src/quadest/models/base.py",
-        "        e *= scale\n",
-        "        e *= scale**2\n",
+        "            return e @ self._noise_factor(C).T\n        e *= scale\n",
+        "            return e @ self._noise_factor(C).T\n        e *= scale**2\n",
         (INTERFACES + "test_gaussian_noise_log_density_and_sampling",),
     ),
     Mutation(
@@ -429,6 +431,62 @@ MUTATIONS = (
         "moments = linearized_moments(model.h(x_pred, u), H, P_pred, self.R_proposal)",
         "moments = linearized_moments(model.h(x_pred, u), H, P_pred, model.R)",
         (STEPS + "test_ekpf_proposal_is_filterpys_kalman_step_from_every_particle",),
+    ),
+    Mutation(
+        "smoothed covariance without the next step's smoothed covariance",
+        "src/quadest/estimators/smoothing.py",
+        "P = step.residual + G @ spread_next @ _t(G)",
+        "P = step.residual + spread_next",
+        (SMOOTHERS + "test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model[cov-ut]",),
+    ),
+    Mutation(
+        "square-root smoother drops the gain on the next factor",
+        "src/quadest/estimators/smoothing.py",
+        "return qr_factor(np.concatenate([step.residual, G @ spread_next], axis=-1))",
+        "return qr_factor(np.concatenate([step.residual, spread_next], axis=-1))",
+        (SMOOTHERS + "test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model[sqrt-ut]",),
+    ),
+    Mutation(
+        "unscented smoother residual with G in place of Gᵀ",
+        "src/quadest/estimators/smoothing.py",
+        "    return G, DX - D_pred @ _t(G)",
+        "    return G, DX - D_pred @ G",
+        (SMOOTHERS + "test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model[cov-cubature]",),
+    ),
+    Mutation(
+        "smoother residual without the process noise",
+        "src/quadest/estimators/sigma_point.py",
+        "noise = None if sqrt_noise is None else G @ sqrt_noise",
+        "noise = None",
+        (SMOOTHERS + "test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model[cov-ut]",),
+    ),
+    Mutation(
+        "fixed lag stops one step short",
+        "src/quadest/estimators/smoothing.py",
+        "for j in range(end - 1, k - 1, -1):",
+        "for j in range(end - 1, k, -1):",
+        (SMOOTHERS + "test_fixed_lag_is_the_fixed_interval_on_the_data_up_to_k_plus_lag[mekf]",),
+    ),
+    Mutation(
+        "FFBSi ignores the transition density",
+        "src/quadest/estimators/particle_smoothing.py",
+        "log_b = np.log(cloud.weights)[:, None, :] + log_transition",
+        "log_b = np.log(cloud.weights)[:, None, :] + 0 * log_transition",
+        (SMOOTHERS + "test_ffbsi_converges_to_the_rts_smoother_as_particles_grow[1000-300-BootstrapPF]",),
+    ),
+    Mutation(
+        "a run the filter lost kept in the smoothed result",
+        "src/quadest/runner.py",
+        "    tracker.flag(filtered.diverged, 1,",
+        "    tracker.flag(filtered.diverged & False, 1,",
+        (SMOOTHING_RUNS + "test_a_run_the_filter_lost_is_left_out_of_the_smoothed_result",),
+    ),
+    Mutation(
+        "MEKF smoother skips the covariance reset",
+        "src/quadest/estimators/error_state_ekf.py",
+        "        reset = self.model.reset_jacobian if self.reset_covariance else None",
+        "        reset = None",
+        (SMOOTHING_RUNS + "test_the_mekf_smoother_resets_its_covariance_as_the_filter_does[True]",),
     ),
 )  # fmt: skip
 
