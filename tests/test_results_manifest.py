@@ -65,23 +65,25 @@ def test_unknown_folder_is_refused(capsys):
 
 
 def _compose_command(command: str):
-    """The task config a manifest command would run: its config (``-cd``/``-cn`` or the root
-    config) with its overrides, less the Hydra settings and the multirun flag; a swept override
-    takes its first value (the first job of the multirun)."""
+    """The task config a manifest command would run: its config (the experiment file that
+    ``quadest experiment=NAME`` makes the primary config, ``-cd``/``-cn``, or the root config) with
+    its overrides, less the Hydra settings and the multirun flag; a swept override takes its first
+    value (the first job of the multirun)."""
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
+    from quadest.app.cli import one_way
     from quadest.app.schema import register_schemas
     from quadest.config.paths import config_dir
 
-    argv = shlex.split(command)[1:]
+    argv = one_way(shlex.split(command)[1:])[0]
     folder, name, overrides = config_dir(), "config", []
     while argv:
         arg = argv.pop(0)
-        if arg == "-cd":
-            folder = str(ROOT / argv.pop(0))
-        elif arg == "-cn":
+        if arg in ("-cd", "--config-dir"):
+            folder = str(ROOT / argv.pop(0))  # an absolute path stays itself
+        elif arg in ("-cn", "--config-name"):
             name = argv.pop(0)
         elif arg != "-m" and not arg.startswith("hydra."):
             parsed = OverridesParser.create().parse_override(arg)
@@ -104,6 +106,16 @@ def test_every_manifest_command_composes_and_validates():
         for command in commands:
             if command.startswith("quadest "):
                 validate(_compose_command(command))
+
+
+def test_every_manifest_command_runs_its_experiment_the_one_way():
+    """An experiment is run as ``quadest experiment=NAME`` (docs/experiments.md, "Running an
+    experiment"), never through Hydra's ``-cd``/``-cn``, which that command turns into for a sweep
+    file (tests/test_experiment_command.py)."""
+    for commands in load_tool().read_manifest().values():
+        for command in commands:
+            argv = shlex.split(command)
+            assert not {"-cd", "--config-dir", "-cn", "--config-name"} & set(argv), command
 
 
 def test_regeneration_keeps_the_folder_readme_no_command_makes(tmp_path, monkeypatch):

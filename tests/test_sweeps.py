@@ -23,6 +23,7 @@ from omegaconf import OmegaConf
 from quadest.aggregate.cli import main as aggregate_main
 from quadest.aggregate.report import aggregate
 from quadest.aggregate.sweep import expected_jobs
+from quadest.app.cli import one_way
 from quadest.app.schema import register_schemas
 from quadest.app.validate import validate
 from quadest.estimators.registry import resolve
@@ -71,10 +72,14 @@ def test_every_experiment_file_composes_and_validates(name):
 
 
 def compose_experiment(name: str, overrides: list[str] | None = None, hydra: bool = False):
+    """The config of ``quadest experiment=NAME [overrides]``: the file ``experiments/NAME.yaml`` as
+    the primary config (``quadest.app.cli.one_way``)."""
+    argv, primary = one_way([f"experiment={name}", *(overrides or [])])
+    assert primary == EXPERIMENTS / f"{name}.yaml"
     register_schemas()
     GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=str(EXPERIMENTS), version_base="1.3"):
-        cfg = compose(config_name=name, overrides=list(overrides or []), return_hydra_config=hydra)
+    with initialize_config_dir(config_dir=str(primary.parent), version_base="1.3"):
+        cfg = compose(config_name=primary.stem, overrides=argv[4:], return_hydra_config=hydra)
     GlobalHydra.instance().clear()
     return cfg
 

@@ -5,6 +5,11 @@ the per-state RMSE table, one line per estimator, one line per pair of estimator
 comparison, ``docs/outputs.md``) and the output folder. Any key can be overridden
 (``quadest estimator.srukf.alpha=0.1 sensor=tactical``) or swept (``quadest -m ...``). Data and
 results computed before are loaded from the result cache (``docs/cache.md``).
+
+``quadest experiment=NAME`` runs a checked-in experiment, a single job or a sweep alike
+(``docs/experiments.md``): an option of the config group ``conf/experiment/`` is composed as any
+group option; a sweep file ``experiments/NAME.yaml`` is a primary config of its own, and
+:func:`one_way` hands it to Hydra as ``--config-dir experiments --config-name NAME``.
 """
 
 from __future__ import annotations
@@ -19,8 +24,10 @@ import hydra
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.core.override_parser.types import ValueType
 from hydra.types import RunMode
-from omegaconf import DictConfig
+from omegaconf import DictConfig, open_dict
 
 from quadest.app.job import run_job
 from quadest.app.schema import register_schemas
@@ -141,24 +148,116 @@ def one_line(exc: BaseException) -> str:
     return message
 
 
-def precheck(argv: list[str]) -> None:
+def precheck(argv: list[str], primary: Path | None = None) -> None:
     """Compose and validate a plain run's config before Hydra starts, so that a typo, a wrong
-    type or a value out of range ends with one line and exit code 2, before any work."""
+    type or a value out of range ends with one line and exit code 2, before any work. ``primary``
+    is the experiment file that is the run's primary config (:func:`one_way`), else the root
+    config. An experiment that sweeps (``hydra.mode: MULTIRUN``) takes sweeps on the command line
+    without ``-m``: each of their values is checked (the other sweeps at their first value); in a
+    single run a sweep is Hydra's "ambiguous value" error."""
     if any(arg in _HYDRA_FLAGS or arg.startswith("--") for arg in argv):
         return
+    folder, name = (str(primary.parent), primary.stem) if primary is not None else (config_dir(), "config")
     overrides = [a for a in argv if not a.lstrip("+~").startswith(("hydra.", "hydra/"))]
     GlobalHydra.instance().clear()
     try:
-        with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
-            cfg = compose(config_name="config", overrides=overrides)
-        validate(cfg)
-        validate_objective(cfg)
+        with initialize_config_dir(config_dir=folder, version_base="1.3"):
+            for cell in _cells(overrides):
+                cfg = compose(config_name=name, overrides=cell, return_hydra_config=cell != overrides)
+                if cell != overrides:
+                    if cfg.hydra.mode != RunMode.MULTIRUN:
+                        compose(config_name=name, overrides=overrides)  # raises Hydra's "ambiguous value"
+                    with open_dict(cfg):
+                        del cfg["hydra"]
+                validate(cfg)
+                validate_objective(cfg)
     except ConfigError as exc:
         _fail(str(exc))
     except Exception as exc:  # Hydra/OmegaConf composition errors
         _fail(one_line(exc))
     finally:
         GlobalHydra.instance().clear()
+
+
+_LISTED = (ValueType.SIMPLE_CHOICE_SWEEP, ValueType.CHOICE_SWEEP, ValueType.RANGE_SWEEP)
+
+
+def _cells(overrides: list[str]) -> list[list[str]]:
+    """The override lists to check: the overrides as given when none sweeps; else each value of
+    each sweep once (``key=a,b``, ``range(...)``), the other sweeps at their first value. A sweep
+    that cannot be listed (``interval(...)``, for a tuning sweeper) is left to Hydra."""
+    parsed = OverridesParser.create().parse_overrides(overrides)
+    swept = {i: p for i, p in enumerate(parsed) if p.is_sweep_override()}
+    if not swept or not all(p.value_type in _LISTED for p in swept.values()):
+        return [overrides]
+    values = {i: list(p.sweep_string_iterator()) for i, p in swept.items()}
+    first = [f"{swept[i].get_key_element()}={values[i][0]}" if i in swept else o for i, o in enumerate(overrides)]
+    cells = [first]
+    for i, rest in values.items():
+        cells += [[*first[:i], f"{swept[i].get_key_element()}={v}", *first[i + 1 :]] for v in rest[1:]]
+    return cells
+
+
+EXPERIMENTS = "experiments"  # the sweep files' folder, at the repository root
+
+
+def experiment_files() -> dict[str, Path]:
+    """The experiments that are primary configs of their own, ``experiments/NAME.yaml`` (the
+    sweeps, with their launcher and callbacks), by name: those of ``./experiments`` (the clone the
+    command runs in, as ``-cd experiments`` reads) first, then those beside the config tree (an
+    editable install, from any directory)."""
+    found: dict[str, Path] = {}
+    for folder in (Path.cwd() / EXPERIMENTS, Path(config_dir()).parent / EXPERIMENTS):
+        for path in sorted(folder.glob("*.yaml")):
+            found.setdefault(path.stem, path.resolve())
+    return found
+
+
+def group_experiments() -> list[str]:
+    """The options of the config group ``experiment`` (``conf/experiment/``)."""
+    return sorted(p.stem for p in (Path(config_dir()) / "experiment").glob("*.yaml"))
+
+
+_PRIMARY_FLAGS = {"-cd", "--config-dir", "-cn", "--config-name", "-cp", "--config-path"}
+
+
+def one_way(argv: list[str]) -> tuple[list[str], Path | None]:
+    """``quadest experiment=NAME [overrides]``, the one way to run any checked-in experiment.
+
+    A NAME of ``conf/experiment/`` is a group option: the argv is returned unchanged. A NAME of
+    ``experiments/`` becomes Hydra's ``--config-dir DIR --config-name NAME`` and the other
+    arguments, in order: exactly the run (its sweep, launcher and callbacks) and the records of
+    ``quadest -cd experiments -cn NAME``. Returns the argv for Hydra and the experiment file (None
+    when there is none). An unknown NAME, a NAME in both places, a sweep file among several
+    experiments or beside ``-cd``/``-cn`` end with one line (exit code 2)."""
+    position = next((i for i, arg in enumerate(argv) if arg.split("=", 1)[0] == "experiment"), None)
+    if position is None:
+        return argv, None
+    value = argv[position].split("=", 1)[1]
+    files, group = experiment_files(), group_experiments()
+    plain = re.fullmatch(r"[\w,\[\] ]*", value)  # names, a comma list or a list; not choice(...), ${...}
+    names = [v.strip() for v in value.strip("[]").split(",") if v.strip()] if plain else []
+    unknown = [n for n in names if n not in files and n not in group and n != "null"]
+    if unknown or (plain and not names):
+        _fail(
+            f"experiment={value}: no experiment {', '.join(unknown) or 'named'}; allowed: "
+            f"{', '.join(sorted({*files, *group}))} (experiments/ is read from the working directory: run from the "
+            "repository root)"
+        )
+    sweeps = [n for n in names if n in files]
+    if not sweeps:
+        return argv, None
+    both = [n for n in sweeps if n in group]
+    if both:
+        _fail(f"experiment={value}: {', '.join(both)} is both conf/experiment/ and {EXPERIMENTS}/; rename one")
+    if len(names) > 1:
+        _fail(f"experiment={value}: {sweeps[0]} ({EXPERIMENTS}/) runs alone; allowed: one experiment of {EXPERIMENTS}/")
+    clash = [arg for arg in argv if arg.split("=", 1)[0] in _PRIMARY_FLAGS]
+    if clash:
+        _fail(f"experiment={value}: {clash[0]} cannot be combined with it; the experiment is its own config")
+    path = files[sweeps[0]]
+    rest = argv[:position] + argv[position + 1 :]
+    return ["--config-dir", str(path.parent), "--config-name", path.stem, *rest], path
 
 
 def _fail(message: str) -> None:
@@ -168,7 +267,9 @@ def _fail(message: str) -> None:
 
 def main() -> None:
     """Console-script entry point."""
-    precheck(sys.argv[1:])
+    argv, primary = one_way(sys.argv[1:])
+    precheck(argv if primary is None else argv[4:], primary)
+    sys.argv[1:] = argv
     _main()
 
 
