@@ -1,6 +1,6 @@
-"""Puts quadest's config tree on Hydra's search path, so that primary configs elsewhere (the
-checked-in experiments, ``quadest -cd experiments -cn NAME``) can use its groups. Hydra imports
-every ``hydra_plugins.*`` module at start-up: keep this light."""
+"""Puts quadest's config tree on Hydra's search path, so that primary configs elsewhere (the sweep
+experiments, ``experiments/NAME.yaml``, which ``quadest experiment=NAME`` makes the primary config)
+can use its groups. Hydra imports every ``hydra_plugins.*`` module at start-up: keep this light."""
 
 from hydra.core.config_search_path import ConfigSearchPath
 from hydra.plugins.search_path_plugin import SearchPathPlugin
