@@ -16,7 +16,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import quadest.app.estimator_runs as estimator_runs
 import quadest.app.job as job
+import quadest.app.open_loop_job as open_loop_job
 from helpers import compose_config
 from quadest.app.cli import precheck
 from quadest.app.validate import validate
@@ -39,7 +41,7 @@ def small_cfg(cache_dir: Path, extra: list[str] | None = None):
 def spies(monkeypatch) -> dict[str, list]:
     """Records every data build, estimator run and PCRLB recursion of the jobs in this process."""
     calls: dict[str, list] = {"builds": [], "runs": [], "pcrlb": []}
-    build, run, pcrlb = job.build_data, job.run_estimator, job.pcrlb_variances
+    build, run, pcrlb = open_loop_job.build_data, estimator_runs.run_estimator, open_loop_job.pcrlb_variances
 
     def counting_build(cfg):
         calls["builds"].append(cfg)
@@ -53,9 +55,9 @@ def spies(monkeypatch) -> dict[str, list]:
         calls["pcrlb"].append(data)
         return pcrlb(data)
 
-    monkeypatch.setattr(job, "build_data", counting_build)
-    monkeypatch.setattr(job, "pcrlb_variances", counting_pcrlb)
-    monkeypatch.setattr(job, "run_estimator", counting_run)
+    monkeypatch.setattr(open_loop_job, "build_data", counting_build)
+    monkeypatch.setattr(open_loop_job, "pcrlb_variances", counting_pcrlb)
+    monkeypatch.setattr(estimator_runs, "run_estimator", counting_run)
     return calls
 
 
@@ -196,17 +198,17 @@ def test_a_job_killed_halfway_recomputes_only_what_is_missing(tmp_path, spies, m
     """Each result is stored as soon as it is done: killed during the third estimator, the job
     restarted runs only that one."""
     cfg = small_cfg(tmp_path / "cache")
-    counted_run = job.run_estimator
+    counted_run = estimator_runs.run_estimator
 
     def killed_at_srukf(name, *args, **kwargs):
         if name == "srukf":
             raise KeyboardInterrupt  # not an Exception: it ends the job as a kill would
         return counted_run(name, *args, **kwargs)
 
-    monkeypatch.setattr(job, "run_estimator", killed_at_srukf)
+    monkeypatch.setattr(estimator_runs, "run_estimator", killed_at_srukf)
     with pytest.raises(KeyboardInterrupt):
         job.run_job(cfg, tmp_path / "killed")
-    monkeypatch.setattr(job, "run_estimator", counted_run)
+    monkeypatch.setattr(estimator_runs, "run_estimator", counted_run)
     spies["builds"].clear()
     spies["runs"].clear()
     job.run_job(cfg, tmp_path / "again")

@@ -29,8 +29,10 @@ import pytest
 from omegaconf import DictConfig, OmegaConf
 
 import quadest
+import quadest.app.estimator_runs as estimator_runs
 import quadest.app.job as job
 from helpers import compose_config
+from quadest.app.estimator_runs import RunSettings
 from quadest.cache import keys
 from quadest.cache.lookup import JobCache
 from quadest.cache.store import CacheStore
@@ -131,12 +133,13 @@ def with_value(resolved: dict, path: LeafPath, value) -> dict:
 
 def all_keys(resolved: dict, tmp_path: Path) -> tuple[str, dict[str, str | None]]:
     """The data key and every estimator's result key of the resolved config ``resolved``, computed
-    as the job computes them (:func:`quadest.app.job.run_job` and :func:`quadest.app.job.run_estimators`)."""
+    as every job computes them (:func:`quadest.app.estimator_runs.run_estimators`)."""
     cache = JobCache(CacheStore(tmp_path / "never-written"), keys.resolved_data_key(resolved))
     bound = float(resolved["divergence_bound"])
     saved_runs = min(int(resolved["output"]["saved_runs"]), int(resolved["runs"]))
     return cache.data_key, {
-        label: job._result_key(cache, label, node, bound, saved_runs) for label, node in resolved["estimator"].items()
+        label: estimator_runs._result_key(cache, label, node, RunSettings(bound, saved_runs))
+        for label, node in resolved["estimator"].items()
     }
 
 
@@ -247,13 +250,13 @@ def test_a_job_recomputes_its_estimators_when_a_runner_setting_changes(setting, 
     """End to end through :func:`quadest.app.job.run_job`: the job passes each runner setting into the
     estimator keys (a changed one recomputes the estimator from the cached data)."""
     runs: list[str] = []
-    run = job.run_estimator
+    run = estimator_runs.run_estimator
 
     def counting(name, *args, **kwargs):
         runs.append(name)
         return run(name, *args, **kwargs)
 
-    monkeypatch.setattr(job, "run_estimator", counting)
+    monkeypatch.setattr(estimator_runs, "run_estimator", counting)
     cfg = compose_config([*SMALL, f"cache.dir={tmp_path / 'cache'}"])
     job.run_job(cfg, tmp_path / "a")
     value = OmegaConf.select(cfg, setting)

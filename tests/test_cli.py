@@ -235,7 +235,7 @@ def test_summary_json_names_the_code_that_made_it(tmp_path, monkeypatch):
     """A commit alone does not name the code when the tree held uncommitted changes: the summary
     says whether it did (``commit_dirty``) and carries the source digest (``code_version``), which
     names the code in any tree; outside git the commit is unknown and dirtiness ``None``."""
-    from quadest.app import job
+    from quadest.app import provenance as job
     from quadest.cache.keys import code_version
 
     small_job(tmp_path, "linear", ["model=linear", "estimator=[ekf]"])

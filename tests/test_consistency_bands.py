@@ -20,7 +20,7 @@ import pytest
 from scipy.stats import chi2
 
 from helpers import compose_config
-from quadest.evaluation.job_tables import estimator_entries, write_metric_tables
+from quadest.evaluation.job_tables import estimator_entries, metric_tables
 from quadest.montecarlo.results import failed_result
 from quadest.simulation.registry import build_data, model_specs
 
@@ -54,7 +54,7 @@ def synthetic_result(data, nees_t: np.ndarray, nis_t: np.ndarray, alive_t: np.nd
 
 
 @pytest.mark.parametrize("model", MODELS)
-def test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis(model, tmp_path):
+def test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis(model):
     """The shares in the summary entry equal the shares of scipy's χ² quantiles with d = the
     model's error dimension (NEES) and its primary measurement dimension (NIS; a model without a
     primary measurement has no NIS and no share)."""
@@ -68,7 +68,7 @@ def test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimens
     nees_t[7] = np.nan  # a step without the statistic does not count
     result = synthetic_result(data, nees_t, nis_t, alive_t)
     params = {"probe": {"kind": "probe"}}
-    tables = write_metric_tables(tmp_path, [result], data, params, {}, np.full((K1, n), np.nan), 0)
+    tables = metric_tables([result], data, params, {}, np.full((K1, n), np.nan), 0)
     entry = estimator_entries([result], tables, params, {"probe": False})["probe"]
 
     assert entry["nees_in_band"] == pytest.approx(expected_share(nees_t, alive_t, n), abs=0)

@@ -399,10 +399,11 @@ def test_job_summary_reports_nis_per_sensor(tmp_path, monkeypatch):
     import json
 
     import quadest.app.job as job
+    import quadest.app.open_loop_job as open_loop_job
 
     data, _ = _two_sensor_problem(runs=3)
     data.labels = {"model": "linear"}
-    monkeypatch.setattr(job, "build_data", lambda cfg: data)
+    monkeypatch.setattr(open_loop_job, "build_data", lambda cfg: data)
     cfg = compose_config([*LINEAR, "runs=3", "estimator=[srukf]", "workers=1", "output.saved_runs=0"])
     job.run_job(cfg, tmp_path)
     summary = json.loads((tmp_path / "summary.json").read_text())

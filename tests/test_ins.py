@@ -15,15 +15,22 @@ from helpers import compose_config
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator
-from quadest.models.ins import InsFilterModel
-from quadest.models.ins_sensors import GpsAiding, MagnetometerAiding, VisionAiding
+from quadest.models.ins import InsFilterModel, ins_layout
 from quadest.montecarlo.streams import STREAMS, run_streams
 from quadest.numerics import quaternion as quat
 from quadest.runner import run_estimator
 from quadest.sensors.barometer import BarometerSpec, measure_barometer
-from quadest.sensors.gps import GPSSpec, measure_gps
+from quadest.sensors.gps import GpsAiding, GPSSpec, measure_gps
+from quadest.sensors.magnetometer import MagnetometerAiding
 from quadest.sensors.mimu import TriadErrors
-from quadest.sensors.vision import VisionSpec, line_of_sight, measure_vision, mount_rotation, project
+from quadest.sensors.vision import (
+    VisionAiding,
+    VisionSpec,
+    line_of_sight,
+    measure_vision,
+    mount_rotation,
+    project,
+)
 from quadest.simulation.registry import build_data
 
 T = 0.01
@@ -181,12 +188,12 @@ def _random_ins_model(chart: str = "rotation_vector", B: int = 3):
                     np.zeros((B, 3)))
         for _ in range(3)
     ]  # fmt: skip
-    vision = VisionSpec()
+    vision, layout = VisionSpec(), ins_layout()
     aiding = {
-        "gps": GpsAiding(GPSSpec(latency=0.1), 0.1, np.eye(6)),
-        "vision": VisionAiding(vision, mount_rotation("forward", 10.0), np.eye(vision.m)),
-        "vision_bearing": VisionAiding(VisionSpec(kind="bearing"), mount_rotation("forward", 10.0), np.eye(16)),
-        "magnetometer": MagnetometerAiding(np.array([20.0, 0.0, -45.0]), errors[2], np.eye(3)),
+        "gps": GpsAiding(GPSSpec(latency=0.1), 0.1, np.eye(6), layout),
+        "vision": VisionAiding(vision, mount_rotation("forward", 10.0), np.eye(vision.m), layout),
+        "vision_bearing": VisionAiding(VisionSpec(kind="bearing"), mount_rotation("forward", 10.0), np.eye(16), layout),
+        "magnetometer": MagnetometerAiding(np.array([20.0, 0.0, -45.0]), errors[2], np.eye(3), layout),
     }
     model = InsFilterModel(T, 9.81, np.eye(15), aiding, errors[0], errors[1], chart=chart, batch_size=B)
     x = np.concatenate(

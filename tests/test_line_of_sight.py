@@ -14,12 +14,12 @@ from helpers import compose_config
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator
-from quadest.models.ins import InsFilterModel
-from quadest.models.ins_sensors import VisionAiding
+from quadest.models.ins import InsFilterModel, ins_layout
 from quadest.numerics import quaternion as quat
 from quadest.runner import run_estimator
 from quadest.sensors.noise_laws import NoiseLaw
 from quadest.sensors.vision import (
+    VisionAiding,
     VisionSpec,
     line_of_sight,
     measure_vision,
@@ -56,7 +56,7 @@ def test_the_measurement_is_the_unit_vector_to_each_beacon():
     straight ahead of a level forward camera is (0, 0, 1); 3-4-5 off axis)."""
     spec = VisionSpec(kind="line_of_sight")
     assert spec.m == 3 * 8 and spec.measurement_names()[:3] == ("beacon1_los_x", "beacon1_los_y", "beacon1_los_z")
-    sensor = VisionAiding(spec, mount_rotation("forward", 10.0), np.eye(spec.m))
+    sensor = VisionAiding(spec, mount_rotation("forward", 10.0), np.eye(spec.m), ins_layout())
     x = _state(np.random.default_rng(1), 4)
     b = sensor.h(x[:, None], np.zeros((4, 6)))[:, 0].reshape(4, 8, 3)
     np.testing.assert_allclose(np.linalg.norm(b, axis=-1), 1.0, rtol=0, atol=4 * EPS)
@@ -91,7 +91,10 @@ def test_error_state_jacobian_matches_finite_differences_on_the_manifold(moving_
     ``h² |y'''|``, with ``|y'''| ≲ 6/‖r‖³ ≤ 1`` at ranges beyond 2 m."""
     rng = np.random.default_rng(3)
     spec = VisionSpec(kind="line_of_sight", tilt_deg=20.0)
-    sensor = VisionAiding(spec, mount_rotation("forward", 20.0), np.eye(spec.m), moving_platform=moving_platform)
+    layout = ins_layout(moving_platform)
+    sensor = VisionAiding(
+        spec, mount_rotation("forward", 20.0), np.eye(spec.m), layout, moving_platform=moving_platform
+    )
     model = InsFilterModel(T, 9.81, np.eye(15), {"vision": sensor}, batch_size=3, platform_input=moving_platform)
     x = _state(rng, 3)
     u = np.zeros((3, 9 if moving_platform else 6))

@@ -195,7 +195,7 @@ def test_estimators_of_every_kind_see_the_same_draws_on_the_linear_model(tmp_pat
 def test_estimators_of_every_kind_get_identical_data_on_the_quadrotor(tmp_path, monkeypatch):
     """What each estimator is run on, recorded at the runner's door: the same truth, inputs,
     measurements, x0 and P0 for the EKF, UKF, SR-UKF and a plugin."""
-    import quadest.app.job
+    import quadest.app.estimator_runs
 
     seen = {}
 
@@ -203,7 +203,7 @@ def test_estimators_of_every_kind_get_identical_data_on_the_quadrotor(tmp_path, 
         seen[name] = data
         return run_estimator(name, est, data, *args, **kwargs)
 
-    monkeypatch.setattr(quadest.app.job, "run_estimator", recording)
+    monkeypatch.setattr(quadest.app.estimator_runs, "run_estimator", recording)
     cfg = compose_config(
         ["runs=2", "duration=0.3", "progress=false", "output.figures=false", "workers=1",
          "estimator=[ekf,ukf,srukf]", *PLUGIN]

@@ -13,14 +13,13 @@ from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.cubature import CKF5
 from quadest.estimators.registry import build_estimator
-from quadest.models.ins import InsFilterModel
-from quadest.models.ins_sensors import VisionAiding
+from quadest.models.ins import InsFilterModel, ins_layout
 from quadest.models.quadrotor_config import scenario
 from quadest.montecarlo.streams import run_streams
 from quadest.numerics import quaternion as quat
 from quadest.quadrotor.scenarios import PlatformApproach
 from quadest.runner import run_estimator
-from quadest.sensors.vision import VisionSpec, mount_rotation
+from quadest.sensors.vision import VisionAiding, VisionSpec, mount_rotation
 from quadest.simulation.quadrotor_data import fly_scenario
 from quadest.simulation.registry import build_data
 
@@ -64,7 +63,7 @@ def test_beacon_on_the_moving_platform_projects_as_computed_by_hand():
     camera sees (x, y, z) = (−y_b, −z_b, x_b) = (1, 2, 2.5), turned by the 30° tilt about x:
     y' = 2 cos 30° − 2.5 sin 30°, z' = 2 sin 30° + 2.5 cos 30°; pixel (320 + 200/z', 240 + 200 y'/z')."""
     spec = VisionSpec(beacons=[[0.5, -1.0, 0.0]] * 3, tilt_deg=30.0)
-    sensor = VisionAiding(spec, mount_rotation("forward", 30.0), np.eye(spec.m), moving_platform=True)
+    sensor = VisionAiding(spec, mount_rotation("forward", 30.0), np.eye(spec.m), ins_layout(True), moving_platform=True)
     x = np.zeros((1, 16))
     x[0, 0:4] = [1.0, 0.0, 0.0, 0.0]
     x[0, 4:7] = [10.0, 0.0, 5.0]
@@ -81,7 +80,7 @@ def test_moving_platform_jacobian_matches_finite_differences():
     (as tests/test_ins.py: round-off ``10 eps |y| / h`` plus truncation ``h²``)."""
     rng = np.random.default_rng(5)
     spec = VisionSpec(tilt_deg=30.0, beacons=[[0.5, -1.0, 0.0], [2.5, 1.0, 0.0], [1.5, 0.0, 0.5]])
-    sensor = VisionAiding(spec, mount_rotation("forward", 30.0), np.eye(spec.m), moving_platform=True)
+    sensor = VisionAiding(spec, mount_rotation("forward", 30.0), np.eye(spec.m), ins_layout(True), moving_platform=True)
     model = InsFilterModel(0.01, 9.81, np.eye(15), {"vision": sensor}, batch_size=2, platform_input=True)
     x = np.concatenate(
         [quat.from_euler(rng.uniform(-0.2, 0.2, (2, 3))), [[30.0, 0.5, 8.0], [40.0, -0.5, 6.0]], np.zeros((2, 9))],

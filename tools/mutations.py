@@ -56,6 +56,7 @@ RULES = "tests/test_rules.py::"
 FAMILY = "tests/test_sigma_point_family.py::"
 INTERFACES = "tests/test_estimator_interfaces.py::"
 CACHE_KEYS = "tests/test_cache_keys_property.py::"
+PIPELINE = "tests/test_pipeline.py::"
 REPLAY_TIMING = "tests/test_replay_timing.py::"
 BANDS = "tests/test_consistency_bands.py::"
 ROUGHENING = "tests/test_roughening.py::"
@@ -89,12 +90,59 @@ MUTATIONS = (
     ),
     Mutation(
         "data drawn from a seed that depends on the estimator kind",
-        "src/quadest/app/job.py",
-        "(label, nodes[label], data, bound, saved_runs",
-        '(label, nodes[label], build_data(OmegaConf.merge(cfg, {"seed": int(cfg.seed) + sum(map(ord, '
-        'nodes[label].get("kind", label)))})), bound, saved_runs',
+        "src/quadest/app/estimator_runs.py",
+        "        data = self.data\n",
+        '        data = __import__("dataclasses").replace(self.data, measurements=self.data.measurements + 1e-3 * '
+        'np.random.default_rng(sum(map(ord, node.get("kind", label))))'
+        '.standard_normal(self.data.measurements.shape))\n',
         (GAPS + "test_estimators_of_every_kind_see_the_same_draws_on_the_linear_model",
          GAPS + "test_estimators_of_every_kind_get_identical_data_on_the_quadrotor"),
+    ),
+    Mutation(
+        "the closed loop bypasses the result cache",
+        "src/quadest/app/pipeline.py",
+        "    cache = JobCache.for_job(cfg)\n",
+        '    cache = JobCache.for_job(cfg) if cfg.loop == "open" else JobCache(None, None)\n',
+        (PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[truth]",
+         PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[estimate]"),
+    ),
+    Mutation(
+        "a closed loop's shared flight flown again in every job",
+        "src/quadest/app/closed_loop_job.py",
+        'self.caches_data = self.mode != "estimate"',
+        "self.caches_data = False",
+        (PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[truth]",),
+    ),
+    Mutation(
+        "the closed loop's workers handed the structured config (they fall back to one process)",
+        "src/quadest/app/closed_loop_job.py",
+        "closed_loop_for(OmegaConf.create(OmegaConf.to_container(cfg, resolve=True)))",
+        "closed_loop_for(cfg)",
+        (PIPELINE + "test_every_job_kind_can_send_its_estimators_to_worker_processes[closed_estimate]",),
+    ),
+    Mutation(
+        "a worker process that dies fails every estimator still running",
+        "src/quadest/app/estimator_runs.py",
+        "            except BrokenProcessPool:  # a process died: run what is missing alone, below\n"
+        "                continue\n",
+        "",
+        (PIPELINE + "test_an_estimator_that_raises_or_whose_process_dies_fails_alone[2]",),
+    ),
+    Mutation(
+        "an estimator that raises ends the job",
+        "src/quadest/app/estimator_runs.py",
+        "    except Exception as exc:  # a broken estimator is recorded, never fatal to the job\n",
+        "    except KeyError as exc:  # a broken estimator is recorded, never fatal to the job\n",
+        (PIPELINE + "test_a_closed_loop_estimator_that_cannot_be_built_fails_alone",
+         PIPELINE + "test_an_estimator_that_raises_or_whose_process_dies_fails_alone[1]"),
+    ),
+    Mutation(
+        "a job kind writes summary.json itself",
+        "src/quadest/app/replay_job.py",
+        "        return Report(tables, fields, arrays, caption(data))\n",
+        '        (finished.out_dir / "summary.json").write_text("{}")\n'
+        "        return Report(tables, fields, arrays, caption(data))\n",
+        (PIPELINE + "test_only_the_pipeline_writes_summary_json_and_the_metric_tables",),
     ),
     Mutation(
         "PCRLB 25 % too high (filters would 'beat' a true bound)",
@@ -106,7 +154,7 @@ MUTATIONS = (
     Mutation(
         "PCRLB called a bound on the quadrotor",
         "src/quadest/evaluation/pcrlb.py",
-        "return model_name in TRUTH_FROM_FILTER_MODEL",
+        "return spec is not None and spec.pcrlb_is_bound",
         "return True",
         (VALIDATION + "test_pcrlb_is_called_a_bound_only_where_it_is_one",),
     ),
@@ -487,6 +535,41 @@ MUTATIONS = (
         "        reset = self.model.reset_jacobian if self.reset_covariance else None",
         "        reset = None",
         (SMOOTHING_RUNS + "test_the_mekf_smoother_resets_its_covariance_as_the_filter_does[True]",),
+    ),
+    Mutation(
+        "a model plugin's PCRLB flag ignored (a known list again)",
+        "src/quadest/evaluation/pcrlb.py",
+        "return spec is not None and spec.pcrlb_is_bound",
+        'return model_name in ("linear", "ungm", "seed001_rates")',
+        ("tests/test_model_plugins.py::test_the_entry_point_registers_the_model",),
+    ),
+    Mutation(
+        "a model's own range checks skipped",
+        "src/quadest/app/validate.py",
+        "    spec.validate(cfg)",
+        "    spec.validate",
+        ("tests/test_model_plugins.py::test_bad_settings_are_refused_with_one_line",),
+    ),
+    Mutation(
+        "every plugin sensor draws from one shared stream",
+        "src/quadest/simulation/aiding.py",
+        'named_streams(seed, runs, f"sensor:{name}:{s}")',
+        'named_streams(seed, runs, "sensor")',
+        ("tests/test_sensor_plugins.py::test_the_rangefinder_measures_the_height_from_its_own_stream",),
+    ),
+    Mutation(
+        "the INS offers its velocity on the position's error columns",
+        "src/quadest/models/ins.py",
+        'error={"attitude": slice(0, 3), "position": slice(3, 6), "velocity": slice(6, 9)},',
+        'error={"attitude": slice(0, 3), "position": slice(3, 6), "velocity": slice(3, 6)},',
+        ("tests/test_ins.py::test_error_state_jacobians_match_finite_differences_on_the_manifold",),
+    ),
+    Mutation(
+        "the quadrotor ignores its further sensors",
+        "src/quadest/models/quadrotor.py",
+        "return {name: MeasurementModel(s.h, s.R, s.names) for name, s in self.aiding.items()}",
+        "return {}",
+        ("tests/test_sensor_plugins.py::test_a_velocity_sensor_on_the_quadrotor_informs_the_filter",),
     ),
 )  # fmt: skip
 

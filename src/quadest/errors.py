@@ -21,11 +21,12 @@ class ConfigError(ValueError):
 
 
 class PluginError(ConfigError):
-    """A selected estimator plugin cannot be used; the message names the plugin and the reason."""
+    """A selected plugin (an estimator, a model or a sensor) cannot be used; the message names the
+    plugin and the reason, ``key`` the config key that selected it."""
 
-    def __init__(self, name: str, message: str) -> None:
+    def __init__(self, name: str, message: str, key: str = "estimator") -> None:
         ValueError.__init__(self, message)
-        self.key, self.value, self.allowed = "estimator", name, message
+        self.key, self.value, self.allowed = key, name, message
 
 
 class FilterDivergence(ArithmeticError):

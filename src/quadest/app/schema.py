@@ -1,8 +1,9 @@
 """Structured-config schemas: every config node has a dataclass, so that a misspelled key or a
 value of the wrong type fails when Hydra composes the config, before any work starts.
 
-The tree mirrors the package: ``model/`` (:mod:`quadest.models.schemas`), ``sensor/``
-(:mod:`quadest.sensors`), ``scenario/`` (:mod:`quadest.quadrotor.scenarios`), ``estimator/``
+The tree mirrors the package: ``model/`` (each option's :class:`~quadest.simulation.spec.ModelSpec`,
+:mod:`quadest.simulation.registry`), ``sensor/`` (:mod:`quadest.sensors`, a plugin sensor's
+settings included: :func:`sensor_schema`), ``scenario/`` (:mod:`quadest.quadrotor.scenarios`), ``estimator/``
 (:mod:`quadest.estimators`). Each YAML option pulls its schema from ``/schema/<group>/<name>``.
 Each feature keeps its own schema dataclasses; this module assembles them into the root
 :class:`ExperimentConf` and stores them in Hydra's ConfigStore (:func:`register_schemas`).
@@ -20,22 +21,14 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 from quadest.config.closed_loop import ClosedLoopConf
 from quadest.errors import ConfigError
 from quadest.estimators.registry import builtin_estimators
-from quadest.models.schemas import (
-    AttitudeModelConf,
-    InsModelConf,
-    LinearModelConf,
-    QuadrotorModelConf,
-    Seed001RatesModelConf,
-    Seed003AttitudeModelConf,
-    UNGMModelConf,
-    UPFBenchmarkModelConf,
-)
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.sensors.barometer import BarometerSpec
 from quadest.sensors.gps import GPSSpec
 from quadest.sensors.mimu import TriadSpec
 from quadest.sensors.noise_laws import NoiseLaw
+from quadest.sensors.registry import sensor_classes
 from quadest.sensors.vision import VisionSpec
+from quadest.simulation.registry import discover as discover_models
 
 
 @dataclass
@@ -155,19 +148,29 @@ def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:
             check_known_keys(child, f"{prefix}{key}.")
 
 
+def sensor_schema() -> type:
+    """The schema of the ``sensor`` node: :class:`SensorConf` (the MIMU, the encoders and the
+    built-in navigation sensors), plus a field ``<name>`` for each registered plugin sensor whose
+    settings live at ``sensor.<name>`` (docs/sensors.md), with its ``Settings`` defaults."""
+    declared = {f.name for f in dataclasses.fields(SensorConf)}
+    extra = [
+        (name, cls.Settings, field(default_factory=cls.Settings))
+        for name, cls in sensor_classes().items()
+        if cls.key() == f"sensor.{name}" and name not in declared
+    ]
+    return dataclasses.make_dataclass("SensorConf", extra, bases=(SensorConf,)) if extra else SensorConf
+
+
 def register_schemas() -> None:
     """Store every schema in Hydra's ConfigStore (idempotent)."""
     cs = ConfigStore.instance()
     cs.store(name="experiment_schema", node=ExperimentConf)
-    cs.store(group="schema/model", name="quadrotor", node=QuadrotorModelConf)
-    cs.store(group="schema/model", name="linear", node=LinearModelConf)
-    cs.store(group="schema/model", name="ungm", node=UNGMModelConf)
-    cs.store(group="schema/model", name="upf_benchmark", node=UPFBenchmarkModelConf)
-    cs.store(group="schema/model", name="seed001_rates", node=Seed001RatesModelConf)
-    cs.store(group="schema/model", name="seed003_attitude", node=Seed003AttitudeModelConf)
-    cs.store(group="schema/model", name="attitude", node=AttitudeModelConf)
-    cs.store(group="schema/model", name="ins", node=InsModelConf)
-    cs.store(group="schema/sensor", name="sensor", node=SensorConf)
+    models, broken = discover_models()
+    for name, spec in models.items():
+        cs.store(group="schema/model", name=name, node=spec.schema)
+    for name in set(broken) - set(models):  # composes, so that the pre-run check names the problem
+        cs.store(group="schema/model", name=name, node={"name": name})
+    cs.store(group="schema/sensor", name="sensor", node=sensor_schema())
     for name, cls in SCENARIOS.items():
         cs.store(group="schema/scenario", name=name, node=cls)
     for name, spec in builtin_estimators().items():

@@ -18,7 +18,8 @@ from quadest.numerics.square_root import requested_kernels
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import validate_replay
 from quadest.sensors.noise_laws import check_noise_law
-from quadest.simulation.registry import model_specs, state_dimension
+from quadest.simulation.aiding import report_plugin_problems as report_sensor_problems
+from quadest.simulation.registry import model_spec, state_dimension
 
 
 def validate_run(cfg) -> None:
@@ -39,10 +40,8 @@ def validate_run(cfg) -> None:
 
 
 def validate_model(cfg) -> None:
-    specs = model_specs()
-    if cfg.model.name not in specs:
-        raise ConfigError("model.name", cfg.model.name, f"one of {sorted(specs)}")
-    spec = specs[cfg.model.name]
+    spec = model_spec(cfg)  # an unknown name or a broken plugin: one line
+    report_sensor_problems(list(cfg.model.get("aiding") or []))
     spec.validate(cfg)
     if spec.uses_quadrotor_groups:
         validate_sensor(cfg)

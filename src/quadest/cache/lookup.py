@@ -1,15 +1,17 @@
-"""The cache as one job uses it: its Monte Carlo data, then each estimator's result."""
+"""The cache as one job uses it: its data, then each estimator's result (every job kind alike:
+:mod:`quadest.app.estimator_runs`)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 from quadest.cache.keys import data_key, digest_text, estimator_key
 from quadest.cache.location import cache_dir
 from quadest.cache.store import CacheStore
-from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
+
+T = TypeVar("T")
 
 
 class JobCache:
@@ -27,8 +29,10 @@ class JobCache:
             return cls(None, None)
         return cls(CacheStore(cache_dir(cfg)), data_key(cfg))
 
-    def data(self, build: Callable[[], MonteCarloData]) -> tuple[MonteCarloData, bool]:
-        """The job's data from the cache, or made by ``build`` and stored; and whether it was a hit."""
+    def data(self, build: Callable[[], T]) -> tuple[T, bool]:
+        """The job's data from the cache, or made by ``build`` and stored; and whether it was a hit.
+        The data is what the job kind makes before any estimator runs: the Monte Carlo data, or a
+        closed loop's shared flight with its recorded data."""
         if self.store is None:
             return build(), False
         data = self.store.get("data", self.data_key)

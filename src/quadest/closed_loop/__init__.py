@@ -6,9 +6,11 @@
 - :mod:`~quadest.closed_loop.quadrotor`: the quadrotor's closed-loop set-up;
 - :mod:`~quadest.closed_loop.seed003`: seed 003's arms (EKF in / EKF out) with its 5-state filter;
 - :mod:`~quadest.closed_loop.seed003_report`: seed 003's paired table;
-- :mod:`~quadest.closed_loop.job`: a job with ``loop`` other than ``open``;
+- :mod:`~quadest.closed_loop.control_tables`: a job's control tables and their ``summary.json`` entry;
 - :mod:`~quadest.closed_loop.report`: the sweep callback that tabulates the loop modes side by side.
 
-Its settings (the ``loop`` key, the state sensor and the crash limits) are
-:mod:`quadest.config.closed_loop`, which the models read too. See ``docs/closed-loop.md``.
+A job with ``loop`` other than ``open`` is the closed-loop kind of the one job pipeline
+(:mod:`quadest.app.closed_loop_job`). Its settings (the ``loop`` key, the state sensor and the
+crash limits) are :mod:`quadest.config.closed_loop`, which the models read too. See
+``docs/closed-loop.md``.
 """

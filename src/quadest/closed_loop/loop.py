@@ -75,6 +75,24 @@ class Flight:
         return self.crash_step >= 0
 
 
+@dataclass
+class FlightRecord:
+    """What a job keeps of a flight: which runs crashed when and why, the control metrics of every
+    run (NaN for crashed runs), and the truth and commands of the first runs (as many as the flight
+    was recorded with). Small enough to cache with an estimator's result (``loop: estimate``) or
+    with the job's data (``truth``, ``measured``)."""
+
+    crash_step: np.ndarray
+    crash_reasons: dict[int, str]
+    metrics: dict[str, np.ndarray]
+    state: np.ndarray
+    command: np.ndarray
+
+    @property
+    def crashed(self) -> np.ndarray:
+        return self.crash_step >= 0
+
+
 def fly(
     plant: QuadrotorPlant,
     controller: BacksteppingController,

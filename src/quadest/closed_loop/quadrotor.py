@@ -17,7 +17,7 @@ import numpy as np
 
 from quadest.closed_loop.control_metrics import StepEvent, control_metrics, step_events
 from quadest.closed_loop.feedback import EstimateFeedback, StateSensorFeedback, TruthFeedback
-from quadest.closed_loop.loop import CrashLimits, Flight, fly
+from quadest.closed_loop.loop import CrashLimits, Flight, FlightRecord, fly
 from quadest.config.closed_loop import closed_loop_settings
 from quadest.estimators.base import Estimator
 from quadest.models.quadrotor import QuadrotorFilterModel
@@ -100,6 +100,14 @@ class QuadrotorLoop:
             self.references[-1].attitude_mode, self.events, self.band, self.steady_window, self.transient_window,
         )  # fmt: skip
         return {key: np.where(flight.crashed, np.nan, value) for key, value in out.items()}
+
+    def flight_record(self, flight: Flight, runs: int | None = None) -> FlightRecord:
+        """What a job keeps of ``flight``: its crashes, the control metrics of every run
+        (:meth:`metrics`) and the truth and commands of the first ``runs`` runs (all: ``None``)."""
+        return FlightRecord(
+            flight.crash_step.copy(), dict(flight.crash_reasons), self.metrics(flight),
+            flight.truth.state[:runs].copy(), flight.truth.command[:runs].copy(),
+        )  # fmt: skip
 
     def fly_shared(self, loop: str) -> tuple[Flight, MonteCarloData]:
         """``loop`` = ``truth`` or ``measured``: fly once and measure the flight as the open loop

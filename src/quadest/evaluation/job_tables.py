@@ -1,11 +1,14 @@
-"""The metric tables and ``summary.json`` entries every job writes (``docs/outputs.md``): the
-open-loop job (:mod:`quadest.app.job`), the closed loop (:mod:`quadest.closed_loop.job`) and the
-flight-log replay (:mod:`quadest.app.replay_report`) share them."""
+"""The metric tables and ``summary.json`` entries every job writes (``docs/outputs.md``).
+
+Each job kind (open loop, closed loop, flight-log replay: :mod:`quadest.app.pipeline`) computes its
+:class:`MetricTables`; :func:`write_tables` is the one place that writes them to disk
+(``metrics.csv``, ``rmse_summary.csv``, ``paired_comparison.csv``, ``rmse_table.md``), and
+:func:`estimator_entries` makes every job's per-estimator entries of ``summary.json``."""
 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +34,8 @@ class MetricTables:
     overview: pd.DataFrame
     printed: pd.DataFrame
     paired: pd.DataFrame
+    preamble: str = ""
+    """Text above the printed table in ``rmse_table.md`` (a replay's caption); empty for most jobs."""
 
 
 def json_float(value) -> float | None:
@@ -39,39 +44,48 @@ def json_float(value) -> float | None:
     return None if np.isnan(value) else value
 
 
-def write_metric_tables(
-    out_dir: Path,
+def metric_tables(
     results: list[EstimatorResult],
     data: MonteCarloData,
     params: dict[str, dict],
     labels: dict,
     bound: np.ndarray,
     seed: int,
-    from_cache: dict[str, bool] | None = None,
 ) -> MetricTables:
-    """Write ``metrics.csv``, ``rmse_summary.csv``, ``paired_comparison.csv`` and ``rmse_table.md``.
+    """The metric tables of a job whose results are errors against a truth (open and closed loop).
 
-    ``labels`` become columns of ``metrics.csv``; ``bound`` is the PCRLB (K+1, n_err) or NaN;
-    ``from_cache`` (estimator → bool) adds the column that says which results were looked up.
+    ``labels`` become columns of ``metrics.csv``; ``bound`` is the PCRLB (K+1, n_err) or NaN.
+    Nothing is written: :func:`write_tables` does that.
     """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         table = tidy_metrics(results, data, params, labels)
-        if from_cache is not None:
-            table.insert(table.columns.get_loc("step_time_us") + 1, "from_cache", table["estimator"].map(from_cache))
         summary = summarize(table).merge(
             floor_table(results, data, bound), on=["estimator", "quantity", "state"], how="left"
         )
         overview = estimator_overview(results, data.model.n_err, data.model.m)
-    table.to_csv(out_dir / "metrics.csv", index=False)
-    summary.to_csv(out_dir / "rmse_summary.csv", index=False)
     printed = rmse_table(summary)
-    paired = paired_comparison(table, seed)
-    paired.to_csv(out_dir / "paired_comparison.csv", index=False)
+    return MetricTables(table, summary, overview, printed, paired_comparison(table, seed))
+
+
+def with_cache_column(tables: MetricTables, from_cache: dict[str, bool]) -> MetricTables:
+    """``tables`` with the column ``from_cache`` (estimator → whether its result was looked up in
+    the result cache) in ``metrics.csv``, right after ``step_time_us``."""
+    table = tables.table.copy()
+    table.insert(table.columns.get_loc("step_time_us") + 1, "from_cache", table["estimator"].map(from_cache))
+    return replace(tables, table=table)
+
+
+def write_tables(out_dir: Path, tables: MetricTables) -> None:
+    """Write ``metrics.csv``, ``rmse_summary.csv``, ``paired_comparison.csv`` and ``rmse_table.md``:
+    the one writer of every job's metric tables."""
+    tables.table.to_csv(out_dir / "metrics.csv", index=False)
+    tables.summary.to_csv(out_dir / "rmse_summary.csv", index=False)
+    tables.paired.to_csv(out_dir / "paired_comparison.csv", index=False)
     (out_dir / "rmse_table.md").write_text(
-        markdown_table(printed) + "\n" + markdown_table(overview.round(4)) + paired_markdown(paired)
-    )
-    return MetricTables(table, summary, overview, printed, paired)
+        tables.preamble + markdown_table(tables.printed) + "\n" + markdown_table(tables.overview.round(4))
+        + paired_markdown(tables.paired)
+    )  # fmt: skip
 
 
 def estimator_entries(

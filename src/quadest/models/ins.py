@@ -29,7 +29,8 @@ with ``R_h = R(exp(φ/2))``, ``R_m = R(q) R_h``:
     δv⁺ = δv + T δa,  δp⁺ = δp + T δv + ½ T² δa
 
 The model has no primary measurement (``m = 0``): the IMU is the input and every aiding sensor is
-a further sensor (:mod:`quadest.models.ins_sensors`) updated when its sample is available.
+a further sensor (:class:`~quadest.sensors.base.SensorModel`, reading the state through
+:func:`ins_layout`) updated when its sample is available.
 """
 
 from __future__ import annotations
@@ -40,8 +41,8 @@ import numpy as np
 
 from quadest.models.attitude import AttitudeMetrics
 from quadest.models.base import FilterModel, MeasurementModel
-from quadest.models.ins_sensors import ATT, POS, VEL, AidingSensor
 from quadest.numerics import quaternion as quat
+from quadest.sensors.base import SensorModel, StateLayout
 from quadest.sensors.mimu import TriadErrors
 
 CHARTS = ("rotation_vector", "mrp")
@@ -51,7 +52,21 @@ STATE_NAMES = ("qw", "qx", "qy", "qz", "x", "y", "z", "vx", "vy", "vz") + tuple(
 STATE_UNITS = ("-",) * 4 + ("m",) * 3 + ("m/s",) * 3 + ("rad/s",) * 3 + ("m/s^2",) * 3
 ERROR_NAMES = ("dtheta_x", "dtheta_y", "dtheta_z") + STATE_NAMES[4:]
 ERROR_UNITS = ("rad",) * 3 + STATE_UNITS[4:]
-BG, BA = slice(10, 13), slice(13, 16)
+ATT, POS, VEL, BG, BA = slice(0, 4), slice(4, 7), slice(7, 10), slice(10, 13), slice(13, 16)
+PLATFORM = slice(6, 9)  # the input's platform position (after the IMU's 6), with a moving platform
+
+
+def ins_layout(platform_input: bool = False) -> StateLayout:
+    """The quantities the INS offers its aiding sensors (:mod:`quadest.sensors.base`): attitude,
+    position and velocity, each moved one to one by its error-state block (``δθ`` is the
+    body-frame rotation vector of the right perturbation), and with ``platform_input`` the
+    moving platform's position from the input."""
+    return StateLayout(
+        n_err=15,
+        state={"attitude": ATT, "position": POS, "velocity": VEL},
+        error={"attitude": slice(0, 3), "position": slice(3, 6), "velocity": slice(6, 9)},
+        inputs={"platform_position": PLATFORM} if platform_input else {},
+    )
 
 
 class InsFilterModel(AttitudeMetrics, FilterModel):
@@ -67,7 +82,7 @@ class InsFilterModel(AttitudeMetrics, FilterModel):
         chart: ``"rotation_vector"`` or ``"mrp"`` (the attitude error's coordinates).
         batch_size: runs the model is bound to.
         platform_input: the input carries the known position of a moving beacon platform after the
-            IMU sample, ``u = [ω̃, f̃, p_P]`` (nu = 9; :class:`~quadest.models.ins_sensors.VisionAiding`,
+            IMU sample, ``u = [ω̃, f̃, p_P]`` (nu = 9; :class:`~quadest.sensors.vision.VisionAiding`,
             docs/seed004-landing.md); the mechanisation ignores it.
     """
 
@@ -84,7 +99,7 @@ class InsFilterModel(AttitudeMetrics, FilterModel):
         sample_period: float,
         gravity: float,
         Q: np.ndarray,
-        aiding: Mapping[str, AidingSensor],
+        aiding: Mapping[str, SensorModel],
         gyro_errors: TriadErrors | None = None,
         accel_errors: TriadErrors | None = None,
         chart: str = "rotation_vector",

@@ -22,12 +22,13 @@ error-free sensors (a mismatch experiment).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import cache
 from types import ModuleType
 
 import numpy as np
 
-from quadest.models.base import FilterModel
+from quadest.models.base import FilterModel, MeasurementModel
 from quadest.numerics.square_root import kernel_backend
 from quadest.quadrotor.dynamics import (
     body_rates,
@@ -45,6 +46,7 @@ from quadest.quadrotor.kinematics import (
     rotation,
 )
 from quadest.quadrotor.params import QuadrotorParams
+from quadest.sensors.base import SensorModel, StateLayout
 from quadest.sensors.mimu import TriadErrors
 
 FORMULATIONS = ("thesis", "augmented")
@@ -83,6 +85,15 @@ _RATE = ("phi_dot", "theta_dot", "psi_dot")
 _POS = ("x", "y", "z")
 
 
+def quadrotor_layout(formulation: str) -> StateLayout:
+    """The quantities the quadrotor filters offer further sensors (:mod:`quadest.sensors.base`):
+    the earth-frame velocity, the first three states of both formulations. Position and, in
+    ``thesis``, the angles are companions integrated outside the filter, so no sensor can correct
+    them."""
+    n = len(QuadrotorFilterModel.formulation_state_names(formulation))
+    return StateLayout(n_err=n, state={"velocity": slice(0, 3)}, error={"velocity": slice(0, 3)})
+
+
 class QuadrotorFilterModel(FilterModel):
     """Filter model of the quadrotor with a MIMU, bound to a batch of Monte Carlo runs.
 
@@ -92,6 +103,8 @@ class QuadrotorFilterModel(FilterModel):
         sample_period: T (s).
         Q, R: process and measurement noise covariances.
         accel_errors, gyro_errors: deterministic sensor errors the filter assumes, per run.
+        aiding: further sensors by name, in update order (``model.aiding``, docs/sensors.md), on
+            :func:`quadrotor_layout`; none by default.
     """
 
     fused_unscented = True
@@ -105,7 +118,9 @@ class QuadrotorFilterModel(FilterModel):
         R: np.ndarray,
         accel_errors: TriadErrors,
         gyro_errors: TriadErrors,
+        aiding: Mapping[str, SensorModel] | None = None,
     ) -> None:
+        self.aiding = dict(aiding or {})
         self.state_names = self.formulation_state_names(formulation)
         self.name = f"quadrotor_{formulation}"
         self.params = params
@@ -142,6 +157,25 @@ class QuadrotorFilterModel(FilterModel):
 
     def _per_run_arrays(self) -> tuple[str, ...]:
         return ("accel_errors", "gyro_errors")
+
+    # --- further sensors (model.aiding) ---
+
+    @property
+    def sensors(self):  # type: ignore[override]
+        return {name: MeasurementModel(s.h, s.R, s.names) for name, s in self.aiding.items()}
+
+    def select(self, runs: int | slice | np.ndarray) -> QuadrotorFilterModel:
+        other = super().select(runs)
+        idx = slice(runs, runs + 1) if isinstance(runs, int | np.integer) else runs
+        other.aiding = {name: s.select(idx) for name, s in self.aiding.items()}
+        return other
+
+    def H_err_analytic(self, x: np.ndarray, u: np.ndarray, sensor: str | None = None) -> np.ndarray | None:
+        """A further sensor's analytic Jacobian; ``None`` for the MIMU (then :meth:`H`)."""
+        return None if sensor is None else self.aiding[sensor].jacobian(x, u)
+
+    def measurement_jacobian(self, sensor: str | None, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return self.H(x, u) if sensor is None else self.aiding[sensor].jacobian(x, u)
 
     # --- mapping from the 16-state truth ---
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from quadest.sensors.mimu import TriadSpec
+from quadest.sensors.magnetometer import MagnetometerConf
 
 
 @dataclass
@@ -43,8 +43,9 @@ class ControllerConf:
 
 
 @dataclass
-class QuadrotorModelConf:
-    """``model=quadrotor``: the OS4 truth, the filter formulation, and the filters' noise."""
+class QuadrotorFlightConf:
+    """The shared quadrotor: the OS4 truth, the filter formulation, and the quadrotor filters'
+    noise; the base of every model option flown on it."""
 
     name: str = "quadrotor"
     formulation: str = "thesis"
@@ -66,6 +67,15 @@ class QuadrotorModelConf:
     measurement_noise_inflation: float = 1.0
     initial_std: InitialStdConf = field(default_factory=InitialStdConf)
     controller: ControllerConf = field(default_factory=ControllerConf)
+
+
+@dataclass
+class QuadrotorModelConf(QuadrotorFlightConf):
+    """``model=quadrotor``: the shared quadrotor and its further sensors, ``aiding`` (in update
+    order; any registered sensor whose measured quantities the filter state holds: the velocity,
+    docs/sensors.md)."""
+
+    aiding: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -115,7 +125,7 @@ class UPFBenchmarkModelConf:
 
 
 @dataclass
-class Seed001RatesModelConf(QuadrotorModelConf):
+class Seed001RatesModelConf(QuadrotorFlightConf):
     """``model=seed001_rates``: seed 001's angular-rate filter on the shared quadrotor
     (:mod:`quadest.models.seed001_rates`); ``Q``, ``R``, ``P0`` are variances per axis, (rad/s)²."""
 
@@ -126,28 +136,13 @@ class Seed001RatesModelConf(QuadrotorModelConf):
 
 
 @dataclass
-class Seed003AttitudeModelConf(QuadrotorModelConf):
+class Seed003AttitudeModelConf(QuadrotorFlightConf):
     """``model=seed003_attitude``: seed 003's 5-state filter (φ, θ, p, q, r) on the shared quadrotor
     (:mod:`quadest.models.seed003_attitude`); ``Q`` and ``R`` are the five diagonal variances."""
 
     name: str = "seed003_attitude"
     Q: list[float] = field(default_factory=lambda: [2.0e-10, 2.0e-10, 4.0e-8, 4.0e-8, 4.0e-8])
     R: list[float] = field(default_factory=lambda: [0.0012, 0.0012, 0.0076, 0.0076, 0.0076])
-
-
-@dataclass
-class MagnetometerConf(TriadSpec):
-    """A magnetometer (:mod:`quadest.sensors.magnetometer`): its rate (Hz, dividing the filter
-    rate), the earth-frame field (µT; default: north 20, down 45 in the z-up frame, inclination
-    66°) and the MIMU's error classes read as soft iron (``scale_factor``, ``cross_coupling``),
-    hard iron (``bias``) and its drift, and white noise (µT/√Hz)."""
-
-    rate: float = 50.0
-    earth_field: list[float] = field(default_factory=lambda: [20.0, 0.0, -45.0])
-    scale_factor: float = 0.02
-    cross_coupling: float = 0.01
-    bias: float = 5.0
-    white_noise: float = 0.03
 
 
 @dataclass
@@ -170,7 +165,7 @@ class AttitudeInitialStdConf:
 
 
 @dataclass
-class AttitudeModelConf(QuadrotorModelConf):
+class AttitudeModelConf(QuadrotorFlightConf):
     """``model=attitude`` (:mod:`quadest.models.attitude`): quaternion, gyro and accelerometer
     biases on the shared quadrotor, accelerometer and magnetometer updates (docs/attitude.md).
     The inherited quadrotor keys fly the truth; its ``process_noise``/``initial_std`` groups belong
@@ -209,7 +204,7 @@ class InsInitialStdConf:
 
 
 @dataclass
-class InsModelConf(QuadrotorModelConf):
+class InsModelConf(QuadrotorFlightConf):
     """``model=ins`` (:mod:`quadest.models.ins`, docs/ins.md): strapdown INS with quaternion,
     position, velocity and both biases, aided by ``aiding`` (in update order; GPS, barometer and
     camera from ``sensor.gps``/``sensor.barometer``/``sensor.vision``, the magnetometer from

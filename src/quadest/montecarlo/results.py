@@ -41,6 +41,9 @@ class EstimatorResult:
         truth, companion_truth: the truth this estimator was scored against, first runs only
             (closed loop with the estimate fed back: each estimator flies its own truth; ``None``
             when the truth is the data's, shared by every estimator).
+        flight: closed loop with the estimate fed back: what the job keeps of the flight this
+            estimator flew (:class:`quadest.closed_loop.loop.FlightRecord`), cached with the
+            result; ``None`` otherwise.
     """
 
     name: str
@@ -65,6 +68,7 @@ class EstimatorResult:
     companion_truth: np.ndarray | None = None
     derived_sq_error_sum: np.ndarray | None = None
     smoothed: EstimatorResult | None = None
+    flight: object | None = None
 
     def _per_run(self, totals: np.ndarray, root: bool = False) -> np.ndarray:
         """Time averages of per-run sums (square-rooted for RMSE); NaN for diverged runs."""

@@ -9,9 +9,16 @@ navigation sensors). So every
 estimator sees the same draws, run ``i`` is the same whatever the number of runs, and a sweep over
 ``sensor.error_scale`` scales the same standard-normal draws. Stream ``j`` of run ``i`` is
 ``SeedSequence(seed, spawn_key=(i, j))``, so appending a stream changes no existing draw.
+
+A sensor from a plugin (docs/sensors.md) is not in :data:`STREAMS`: its streams are *named*,
+``SeedSequence(seed, spawn_key=(i, NAMED, *h))`` with ``h`` four 32-bit words of the SHA-256 of
+the stream's name (:func:`named_streams`), so they share no draw with the streams above or with
+another sensor's, and installing or selecting one changes no existing draw.
 """
 
 from __future__ import annotations
+
+import hashlib
 
 import numpy as np
 
@@ -44,3 +51,18 @@ def run_seed_sequences(seed: int, runs: int) -> dict[str, list[np.random.SeedSeq
 def run_streams(seed: int, runs: int) -> dict[str, list[np.random.Generator]]:
     """One generator per (purpose, run), all from ``SeedSequence(seed)``."""
     return {name: [np.random.default_rng(s) for s in seqs] for name, seqs in run_seed_sequences(seed, runs).items()}
+
+
+NAMED = 2**32 - 1
+"""The spawn-key branch of the named streams: never the index of a stream in :data:`STREAMS`."""
+
+
+def named_seed_sequences(seed: int, runs: int, name: str) -> list[np.random.SeedSequence]:
+    """One seed sequence per run for the stream called ``name`` (module docstring)."""
+    words = [int(w) for w in np.frombuffer(hashlib.sha256(name.encode()).digest()[:16], dtype="<u4")]
+    return [np.random.SeedSequence(seed, spawn_key=(i, NAMED, *words)) for i in range(runs)]
+
+
+def named_streams(seed: int, runs: int, name: str) -> list[np.random.Generator]:
+    """One generator per run for the stream called ``name`` (module docstring)."""
+    return [np.random.default_rng(s) for s in named_seed_sequences(seed, runs, name)]

@@ -2,7 +2,7 @@
 
 :mod:`quadest.replay.ulog` reads a PX4 ULog file, :mod:`quadest.replay.align` puts its samples on
 the filter's time grid and :mod:`quadest.replay.data` fills the Monte Carlo data from them; the
-replay job's outputs are written by :mod:`quadest.app.replay_report`. There is no truth in a real
+replay job's outputs are made by :mod:`quadest.app.replay_job`. There is no truth in a real
 log: the filters are compared with PX4's own onboard estimate, and the outputs call that the
 *difference to PX4*.
 """

@@ -24,7 +24,7 @@ aligned log (:mod:`quadest.replay.align`), in PX4's frames (body FRD, earth NED)
   the magnetometer; zero biases), never from PX4's estimate;
 - ``truth``: PX4's attitude as a filter state with zero biases (PX4 does not log its bias
   estimates). It is a *reference*, labelled ``reference: PX4 onboard
-  estimate``; only its attitude is compared (:mod:`quadest.app.replay_report`).
+  estimate``; only its attitude is compared (:mod:`quadest.app.replay_job`).
 """
 
 from __future__ import annotations

@@ -15,15 +15,20 @@ The MS5611 class (the PX4/ArduPilot default) resolves 0.012 mbar (≈ 0.1 m) at 
 oversampling. Draw order from the run's ``"barometer"`` stream: ``s``, ``b0``, the walk's
 increments (K+1), then the white noise (K+1). Samples every ``round(1/(rate T))`` filter steps;
 NaN and unavailable in between.
+
+:class:`Barometer` is the sensor (``model.aiding: [barometer, ...]``, settings
+``sensor.barometer``), :class:`BarometerAiding` the filters' model of it, ``h = z``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadest.sensors.magnetometer import sample_stride
+from quadest.config.ranges import require_non_negative, require_positive
+from quadest.sensors.base import Sensor, SensorModel, StateLayout, TrueMotion, sample_stride
 from quadest.sensors.noise_laws import NoiseLaw, draw_noise
 from quadest.sensors.record import SensorRecord
 
@@ -63,3 +68,45 @@ def measure_barometer(
     available = np.arange(K1) % sample_stride(spec.rate, sample_period) == 0
     values[:, ~available] = np.nan
     return SensorRecord(values, available)
+
+
+@dataclass
+class BarometerAiding(SensorModel):
+    """Altitude ``h = z``, the third component of the position: ``∂h/∂p = [0, 0, 1]``."""
+
+    R: np.ndarray
+    layout: StateLayout
+    names: tuple[str, ...] = ("baro_z",)
+
+    def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return self.quantity("position", x, u)[..., 2:3].copy()
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        J = self._zeros(x)
+        self.place(J, slice(0, 1), "position", np.array([[0.0, 0.0, 1.0]]), x, u)
+        return J
+
+
+class Barometer(Sensor):
+    """The barometric altimeter (module docstring); ``R`` is :meth:`BarometerSpec.variance` (the
+    filters do not estimate the bias) times the model's ``measurement_noise_inflation``."""
+
+    config_name = "barometer"
+    Settings = BarometerSpec
+    streams = ("barometer",)
+    measures = ("position",)
+
+    @classmethod
+    def validate(cls, settings: BarometerSpec, key: str, sample_period: float) -> None:
+        super().validate(settings, key, sample_period)
+        for name in ("bias", "bias_random_walk", "scale_factor"):
+            require_non_negative(f"{key}.{name}", getattr(settings, name))
+        require_positive(f"{key}.white_noise", settings.white_noise, "must be > 0 (R is built from it)")
+
+    def simulate(self, truth: TrueMotion, streams: Mapping[str, list[np.random.Generator]]) -> SensorRecord:
+        altitude = truth.position[..., 2]
+        return measure_barometer(self.settings, altitude, self.context.sample_period, streams["barometer"])
+
+    def measurement_model(self, layout: StateLayout) -> BarometerAiding:
+        variance = self.settings.variance(self.context.duration)
+        return BarometerAiding(self.context.noise_inflation * variance * np.eye(1), layout)

@@ -19,15 +19,21 @@ filter rate):
 
 Draw order from the run's ``"gps"`` stream: the drift's normals (K+1, 3), then the white noise
 (K+1, 6), so the noise law does not move the drift draws. Units: m and m/s.
+
+:class:`Gps` is the sensor (``model.aiding: [gps, ...]``, settings ``sensor.gps``), and
+:class:`GpsAiding` the filters' model of it: ``h = [p − τ v, v]`` with its Jacobian on the
+model's position and velocity (docs/ins.md).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from quadest.sensors.magnetometer import sample_stride
+from quadest.config.ranges import require_non_negative, require_positive
+from quadest.sensors.base import Sensor, SensorModel, StateLayout, TrueMotion, sample_stride
 from quadest.sensors.noise_laws import NoiseLaw, draw_noise
 from quadest.sensors.record import SensorRecord
 
@@ -98,3 +104,59 @@ def measure_gps(
     available = np.arange(K1) % sample_stride(spec.rate, sample_period) == 0
     values[:, ~available] = np.nan
     return SensorRecord(values, available)
+
+
+@dataclass
+class GpsAiding(SensorModel):
+    """Position (and velocity) with the receiver's latency ``delay`` compensated to first order:
+    ``h = [p − delay·v, v]`` (:func:`gps_prediction`), so ``∂h/∂p = [I; 0]`` and
+    ``∂h/∂v = [−delay·I; I]``."""
+
+    spec: GPSSpec
+    delay: float
+    R: np.ndarray
+    layout: StateLayout
+
+    @property
+    def names(self) -> tuple[str, ...]:  # type: ignore[override]
+        return self.spec.measurement_names()
+
+    def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        p, v = self.quantity("position", x, u), self.quantity("velocity", x, u)
+        return gps_prediction(p, v, self.delay, self.spec.measure_velocity)
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        J = self._zeros(x)
+        self.place(J, slice(0, 3), "position", np.eye(3), x, u)
+        self.place(J, slice(0, 3), "velocity", -self.delay * np.eye(3), x, u)
+        if self.spec.measure_velocity:
+            self.place(J, slice(3, 6), "velocity", np.eye(3), x, u)
+        return J
+
+
+class Gps(Sensor):
+    """The GPS receiver (module docstring). ``R`` is the white noise's variance plus the drift's
+    stationary variance on the position (the filters do not estimate the drift), times the
+    model's ``measurement_noise_inflation``."""
+
+    config_name = "gps"
+    Settings = GPSSpec
+    streams = ("gps",)
+    measures = ("position", "velocity")
+
+    @classmethod
+    def validate(cls, settings: GPSSpec, key: str, sample_period: float) -> None:
+        super().validate(settings, key, sample_period)
+        for name in ("latency", "position_drift"):
+            require_non_negative(f"{key}.{name}", getattr(settings, name))
+        for name in ("horizontal_noise", "vertical_noise", "velocity_noise", "drift_time"):
+            require_positive(f"{key}.{name}", getattr(settings, name), "must be > 0 (R is built from it)")
+
+    def simulate(self, truth: TrueMotion, streams: Mapping[str, list[np.random.Generator]]) -> SensorRecord:
+        return measure_gps(self.settings, truth.position, truth.velocity, self.context.sample_period, streams["gps"])
+
+    def measurement_model(self, layout: StateLayout) -> GpsAiding:
+        spec, T = self.settings, self.context.sample_period
+        R = np.diag(spec.white_std() ** 2)
+        R[0:3, 0:3] += spec.position_drift**2 * np.eye(3)
+        return GpsAiding(spec, spec.latency_steps(T) * T, self.context.noise_inflation * R, layout)

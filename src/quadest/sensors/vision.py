@@ -36,17 +36,23 @@ the filter rate) and is used only when every beacon is in front of the camera, i
 view that ``focal_length`` and ``image_size`` span and within ``max_range`` in every run of the
 batch (the runs differ only by their start point); other frames are dropped (the sample is NaN
 and unavailable), since one sensor record has one availability mask for the batch.
+
+:class:`Vision` is the sensor (``model.aiding: [vision, ...]``, settings ``sensor.vision``),
+:class:`VisionAiding` the filters' model of it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from quadest.config.ranges import require_non_negative, require_positive
+from quadest.errors import ConfigError
 from quadest.numerics import quaternion as quat
-from quadest.sensors.magnetometer import sample_stride
-from quadest.sensors.noise_laws import NoiseLaw, draw_noise
+from quadest.sensors.base import Sensor, SensorModel, StateLayout, TrueMotion, check_rate, sample_stride
+from quadest.sensors.noise_laws import NoiseLaw, check_noise_law, draw_noise
 from quadest.sensors.record import SensorRecord
 
 KINDS = ("pixel", "bearing", "line_of_sight")
@@ -197,3 +203,98 @@ def projection_jacobian(r_c: np.ndarray, kind: str, focal_length: float) -> np.n
         sx, sy = x**2 + z**2, y**2 + z**2
         rows = [[z / sx, zero, -x / sx], [zero, z / sy, -y / sy]]
     return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
+
+
+@dataclass
+class VisionAiding(SensorModel):
+    """Beacon pixels, bearings or unit line-of-sight vectors through the nominal camera (module
+    docstring): ``r_c = C_cb R(q)ᵀ (b − p)``, so ``∂r_c/∂δθ = C_cb [r_b]×`` and
+    ``∂r_c/∂p = −C_cb R(q)ᵀ``, chained with the kind's ``∂ project/∂r_c``.
+
+    With ``moving_platform`` the beacons ``b`` are in the frame of a platform that translates
+    without rotating, and the input carries its known position (the layout's
+    ``platform_position``; seed 004 links the platform's navigation data to the vehicle,
+    docs/seed004-landing.md): ``b − p`` becomes ``b − (p − p_P)``, the same Jacobians at the
+    relative position."""
+
+    spec: VisionSpec
+    C_cb: np.ndarray
+    R: np.ndarray
+    layout: StateLayout
+    moving_platform: bool = False
+
+    @property
+    def names(self) -> tuple[str, ...]:  # type: ignore[override]
+        return self.spec.measurement_names()
+
+    @property
+    def _centre(self) -> np.ndarray:
+        return 0.5 * np.asarray(self.spec.image_size, dtype=float)
+
+    def _relative_position(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The vehicle's position relative to the platform, (B, K, 3) or (B, 3)."""
+        p = self.quantity("position", x, u)
+        if not self.moving_platform:
+            return p
+        platform = self.quantity("platform_position", x, u)
+        return p - (platform[:, None, :] if p.ndim == 3 else platform)
+
+    def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        p = self._relative_position(x, u)
+        r_c = line_of_sight(self.quantity("attitude", x, u), p, self.spec.beacon_array, self.C_cb)
+        return project(r_c, self.spec.kind, self.spec.focal_length, self._centre)
+
+    def jacobian(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        q, p = self.quantity("attitude", x, u), self._relative_position(x, u)
+        R_q = quat.rotation_matrix(q)
+        r_b = np.einsum("bji,bnj->bni", R_q, self.spec.beacon_array - p[:, None, :])
+        r_c = np.einsum("ij,bnj->bni", self.C_cb, r_b)
+        D = projection_jacobian(r_c, self.spec.kind, self.spec.focal_length) @ self.C_cb  # (B, N, rows, 3)
+        J = self._zeros(x)
+        rows = slice(None)
+        self.place(J, rows, "attitude", (D @ quat.skew(r_b)).reshape(x.shape[0], -1, 3), x, u)
+        self.place(J, rows, "position", -(D @ np.swapaxes(R_q, -1, -2)[:, None]).reshape(x.shape[0], -1, 3), x, u)
+        return J
+
+
+class Vision(Sensor):
+    """The camera and its beacons (module docstring); ``R = σ² I`` with the kind's white-noise
+    ``σ`` times the model's ``measurement_noise_inflation``. On a scenario with a moving platform
+    the beacons are in the platform's frame and the model must offer ``platform_position``."""
+
+    config_name = "vision"
+    Settings = VisionSpec
+    streams = ("vision",)
+    measures = ("position", "attitude")
+    moving_platform = False  # set by simulate from the truth
+
+    @classmethod
+    def validate(cls, settings: VisionSpec, key: str, sample_period: float) -> None:
+        v = settings
+        check_rate(f"{key}.rate", v.rate, sample_period)
+        if v.kind not in KINDS:
+            raise ConfigError(f"{key}.kind", v.kind, f"one of {list(KINDS)}")
+        if v.mount not in MOUNTS:
+            raise ConfigError(f"{key}.mount", v.mount, f"one of {list(MOUNTS)}")
+        for name in ("pixel_noise", "bearing_noise", "los_noise", "focal_length", "max_range"):
+            require_positive(f"{key}.{name}", getattr(v, name))
+        for name in ("misalignment", "focal_scale"):
+            require_non_negative(f"{key}.{name}", getattr(v, name))
+        if len(v.image_size) != 2 or min(v.image_size) <= 0:
+            raise ConfigError(f"{key}.image_size", list(v.image_size), "two sizes [width, height] > 0 in px")
+        beacons = [list(b) for b in v.beacons]
+        if len(beacons) < 3 or any(len(b) != 3 for b in beacons):
+            raise ConfigError(f"{key}.beacons", beacons, "at least 3 beacons, each [x, y, z] in m (earth frame)")
+        check_noise_law(f"{key}.noise_law", v.noise_law)
+
+    def simulate(self, truth: TrueMotion, streams: Mapping[str, list[np.random.Generator]]) -> SensorRecord:
+        self.moving_platform = truth.platform is not None
+        relative = truth.position if truth.platform is None else truth.position - truth.platform
+        return measure_vision(self.settings, truth.attitude, relative, self.context.sample_period, streams["vision"])
+
+    def measurement_model(self, layout: StateLayout) -> VisionAiding:
+        spec, moving = self.settings, self.moving_platform
+        if moving and "platform_position" not in layout.inputs:
+            raise ValueError("a moving beacon platform needs a model whose input carries platform_position")
+        R = self.context.noise_inflation * spec.noise_std**2 * np.eye(spec.m)
+        return VisionAiding(spec, mount_rotation(spec.mount, spec.tilt_deg), R, layout, moving_platform=moving)

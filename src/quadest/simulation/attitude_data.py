@@ -29,6 +29,7 @@ from quadest.errors import ConfigError
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.config_checks import validate_quadrotor
 from quadest.models.quadrotor_config import triad_spec
+from quadest.models.schemas import AttitudeModelConf
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
@@ -37,6 +38,7 @@ from quadest.sensors.magnetometer import measure_magnetometer, sample_stride
 from quadest.sensors.mimu import TriadErrors, TriadSpec, draw_triad_errors, measure_triad
 from quadest.sensors.noise_laws import noise_law_from_config
 from quadest.simulation.quadrotor_data import fly_scenario
+from quadest.simulation.spec import ModelSpec
 
 
 def _measure_with_truth_bias(spec: TriadSpec, errors: TriadErrors, y: np.ndarray, T: float, rngs, law):
@@ -150,3 +152,8 @@ def build_attitude_data(cfg) -> MonteCarloData:
         labels=labels,
         sensors={"mag": z_mag},
     )
+
+
+MODEL = ModelSpec(  # n_err = 9: attitude error, gyro and accelerometer biases
+    "attitude", AttitudeModelConf, build_attitude_data, lambda cfg: 9, validate_attitude, uses_quadrotor_groups=True
+)

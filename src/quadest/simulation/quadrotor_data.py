@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadest.models.quadrotor import QuadrotorFilterModel
+from quadest.errors import ConfigError
+from quadest.models.config_checks import validate_quadrotor
+from quadest.models.quadrotor import QuadrotorFilterModel, quadrotor_layout
 from quadest.models.quadrotor_config import (
     controller_gains,
     group_diagonal,
@@ -18,17 +20,22 @@ from quadest.models.quadrotor_config import (
     scenario,
     triad_spec,
 )
+from quadest.models.schemas import QuadrotorModelConf
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.data import sample_count
 from quadest.montecarlo.initial import draw_initial_estimates, initial_covariance
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.numerics import quaternion as quat
 from quadest.quadrotor.controller import BacksteppingController
 from quadest.quadrotor.plant import PlantDraws
 from quadest.quadrotor.scenarios import Scenario
 from quadest.quadrotor.simulate import TruthTrajectory, simulate_truth
+from quadest.sensors.base import SensorModel, TrueMotion
 from quadest.sensors.encoders import encoder_resolution, measure_rotor_speeds
 from quadest.sensors.mimu import TriadErrors, draw_triad_errors, measure_triad
 from quadest.sensors.noise_laws import noise_law_from_config
+from quadest.simulation.aiding import measure_aiding, validate_aiding
+from quadest.simulation.spec import ModelSpec
 
 
 def draw_start(flown: Scenario, streams: dict) -> np.ndarray:
@@ -83,9 +90,11 @@ def draw_plant(cfg, streams: dict, flown: Scenario) -> PlantDraws:
     )
 
 
-def quadrotor_filter_model(cfg, accel_errors: TriadErrors, gyro_errors: TriadErrors) -> QuadrotorFilterModel:
+def quadrotor_filter_model(
+    cfg, accel_errors: TriadErrors, gyro_errors: TriadErrors, aiding: dict[str, SensorModel] | None = None
+) -> QuadrotorFilterModel:
     """The filter model of ``cfg.model``, bound to the runs' assumed sensor errors (the drawn
-    ones when ``calibrated``, error-free otherwise)."""
+    ones when ``calibrated``, error-free otherwise) and to its further sensors ``aiding``."""
     mcfg, T, runs = cfg.model, float(cfg.sample_period), accel_errors.bias.shape[0]
     scale = float(cfg.sensor.error_scale)
     accel, gyro = triad_spec(cfg.sensor.accel, scale), triad_spec(cfg.sensor.gyro, scale)
@@ -95,7 +104,9 @@ def quadrotor_filter_model(cfg, accel_errors: TriadErrors, gyro_errors: TriadErr
     state_names = QuadrotorFilterModel.formulation_state_names(mcfg.formulation)
     Q = np.diag(group_diagonal(state_names, mcfg.process_noise) ** 2)
     R = measurement_covariance(accel, gyro, T, float(cfg.duration), float(mcfg.measurement_noise_inflation))
-    return QuadrotorFilterModel(quadrotor_params(mcfg), mcfg.formulation, T, Q, R, assumed_acc, assumed_gyro)
+    return QuadrotorFilterModel(
+        quadrotor_params(mcfg), mcfg.formulation, T, Q, R, assumed_acc, assumed_gyro, aiding=aiding
+    )
 
 
 def initial_condition(cfg, state_names: tuple[str, ...], x_true0: np.ndarray, streams: dict):
@@ -107,13 +118,17 @@ def initial_condition(cfg, state_names: tuple[str, ...], x_true0: np.ndarray, st
 
 
 def data_labels(cfg, flown: Scenario) -> dict:
-    """The descriptive columns of a quadrotor job's metrics table."""
+    """The descriptive columns of a quadrotor job's metrics table (``aiding`` only with further
+    sensors)."""
     mcfg, scfg, T = cfg.model, cfg.sensor, float(cfg.sample_period)
-    return {
+    labels = {
         "model": mcfg.name, "formulation": mcfg.formulation, "calibrated": bool(mcfg.calibrated),
         "sensor": scfg.name, "error_scale": float(scfg.error_scale), "scenario": flown.name,
         "encoder_resolution": encoder_resolution(int(scfg.encoder.lines), T) if scfg.encoder.lines else 0.0,
     }  # fmt: skip
+    if mcfg.get("aiding"):
+        labels["aiding"] = "+".join(mcfg.aiding)
+    return labels
 
 
 def _measure(cfg, streams: dict, truth: TruthTrajectory) -> tuple[np.ndarray, np.ndarray, TriadErrors, TriadErrors]:
@@ -139,7 +154,9 @@ def record_quadrotor_data(cfg, streams: dict, flown: Scenario, truth: TruthTraje
     return _data(cfg, streams, flown, model, truth.time, x_true, companion_truth, u, z)
 
 
-def _data(cfg, streams: dict, flown: Scenario, model, time, x_true, companion_truth, u, z) -> MonteCarloData:
+def _data(
+    cfg, streams: dict, flown: Scenario, model, time, x_true, companion_truth, u, z, sensors=None
+) -> MonteCarloData:
     """The :class:`MonteCarloData` of the recorded arrays, with the initial estimates drawn from
     the runs' ``"initial"`` streams."""
     x0, P0 = initial_condition(cfg, model.state_names, x_true[:, 0], streams)
@@ -155,6 +172,7 @@ def _data(cfg, streams: dict, flown: Scenario, model, time, x_true, companion_tr
         companion0=companion_truth[:, 0].copy(),
         estimator_seeds=run_seed_sequences(int(cfg.seed), len(streams["start"]))["estimator"],
         labels=data_labels(cfg, flown),
+        sensors=sensors or {},
     )
 
 
@@ -169,11 +187,16 @@ def build_quadrotor_data(cfg) -> MonteCarloData:
     inputs and the measurements of each sample), so the 16-state truth, the specific force and
     the sensors' noise arrays exist for one chunk at a time. Every run is the run flown alone
     (each run's generators, element-wise arithmetic), so the data do not depend on the chunking.
+
+    Further sensors (``model.aiding``, docs/sensors.md) measure the whole batch at once after the
+    chunks (position, velocity and attitude are kept for it), so a sensor whose availability
+    depends on every run sees them all.
     """
     runs = int(cfg.runs)
     streams = run_streams(int(cfg.seed), runs)
     arrays: list[np.ndarray] = []
     errors: list[tuple[TriadErrors, TriadErrors]] = []
+    motion: list[np.ndarray] = []
     time = flown = None
     for first in range(0, runs, DATA_CHUNK_RUNS):
         chunk = slice(first, min(first + DATA_CHUNK_RUNS, runs))
@@ -187,10 +210,17 @@ def build_quadrotor_data(cfg) -> MonteCarloData:
         for out, part in zip(arrays, parts, strict=True):
             out[chunk] = part
         errors.append((accel_errors, gyro_errors))
+        if cfg.model.get("aiding"):
+            motion.append(truth.state[..., 0:9].copy())
         time = truth.time
         del truth, parts, z, u
-    model = quadrotor_filter_model(cfg, *(_concatenate([e[i] for e in errors]) for i in (0, 1)))
-    return _data(cfg, streams, flown, model, time, *arrays)
+    records, aiding = {}, {}
+    if motion:
+        state = np.concatenate(motion)
+        truth_motion = TrueMotion(time, state[..., 0:3], state[..., 3:6], quat.from_euler(state[..., 6:9]))
+        records, aiding = measure_aiding(cfg, truth_motion, streams, quadrotor_layout(cfg.model.formulation))
+    model = quadrotor_filter_model(cfg, *(_concatenate([e[i] for e in errors]) for i in (0, 1)), aiding=aiding)
+    return _data(cfg, streams, flown, model, time, *arrays, sensors=records)
 
 
 def _concatenate(errors: list[TriadErrors]) -> TriadErrors:
@@ -198,3 +228,23 @@ def _concatenate(errors: list[TriadErrors]) -> TriadErrors:
     return TriadErrors(
         *(np.concatenate([getattr(e, name) for e in errors]) for name in ("matrix", "asymmetry", "bias"))
     )
+
+
+def validate_quadrotor_model(cfg) -> None:
+    """Range checks of ``model=quadrotor``: the quadrotor's and its further sensors'
+    (:func:`~quadest.simulation.aiding.validate_aiding`; the closed loop flies without them)."""
+    validate_quadrotor(cfg)
+    if cfg.model.get("aiding"):
+        if cfg.get("loop", "open") != "open":
+            raise ConfigError("model.aiding", list(cfg.model.aiding), "further sensors need loop=open")
+        validate_aiding(cfg, quadrotor_layout(cfg.model.formulation))
+
+
+MODEL = ModelSpec(
+    "quadrotor",
+    QuadrotorModelConf,
+    build_quadrotor_data,
+    lambda cfg: len(QuadrotorFilterModel.formulation_state_names(cfg.model.formulation)),
+    validate_quadrotor_model,
+    uses_quadrotor_groups=True,
+)

@@ -1,75 +1,111 @@
-"""The ``model`` config group: each option's schema, data builder, state dimension and checks."""
+"""The ``model`` config group: every option's :class:`~quadest.simulation.spec.ModelSpec`, found
+once, and the data of the configured one.
+
+Two sources behind the same contract (docs/models.md), as for estimators (docs/plugins.md):
+
+1. **In the repository**: any module-level :class:`ModelSpec` in a module of
+   :mod:`quadest.simulation` (``MODEL = ModelSpec("pendulum", ...)``). Adding one touches no other
+   file: the registry scans the package.
+2. **From an installed package**: an entry point in the group ``quadest.models`` whose name is the
+   option's name and whose value is its spec (``"pendulum = mypkg.pendulum:MODEL"``).
+
+A plugin that fails to import, is not a usable spec, is named unlike its entry point or reuses a
+built-in name never takes quadest down: it is reported with one line naming the plugin, and
+refused if selected (:func:`report_plugin_problems`).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+import importlib
+import pkgutil
+import sys
+from functools import cache
+from importlib.metadata import entry_points
 
-from quadest.models.config_checks import validate_linear, validate_quadrotor, validate_ungm
-from quadest.models.quadrotor import QuadrotorFilterModel
-from quadest.models.schemas import (
-    AttitudeModelConf,
-    InsModelConf,
-    LinearModelConf,
-    QuadrotorModelConf,
-    Seed001RatesModelConf,
-    Seed003AttitudeModelConf,
-    UNGMModelConf,
-    UPFBenchmarkModelConf,
-)
-from quadest.models.seed001_rates import validate_seed001_rates
-from quadest.models.seed003_attitude import validate_seed003_attitude
-from quadest.models.upf_benchmark import validate_upf_benchmark
+from quadest.errors import ConfigError, PluginError
 from quadest.montecarlo import MonteCarloData
-from quadest.simulation.attitude_data import build_attitude_data, validate_attitude
-from quadest.simulation.ins_data import build_ins_data, validate_ins
-from quadest.simulation.quadrotor_data import build_quadrotor_data
-from quadest.simulation.seed001_rates_data import build_seed001_rates_data
-from quadest.simulation.seed003_attitude_data import build_seed003_attitude_data
-from quadest.simulation.upf_benchmark_data import build_upf_benchmark_data
-from quadest.simulation.validation_data import build_linear_data, build_ungm_data
+from quadest.simulation.spec import ModelSpec, spec_problems
+
+ENTRY_POINT_GROUP = "quadest.models"
 
 
-@dataclass(frozen=True)
-class ModelSpec:
-    """A model option: ``build(cfg)`` makes the Monte Carlo data, ``state_dimension(cfg)`` the
-    filter's n, ``validate(cfg)`` the range checks of ``cfg.model``."""
+def _builtin_specs() -> dict[str, ModelSpec]:
+    import quadest.simulation as package
 
-    schema: type
-    build: Callable[[object], MonteCarloData]
-    state_dimension: Callable[[object], int]
-    validate: Callable[[object], None]
-    uses_quadrotor_groups: bool = False
+    specs: dict[str, ModelSpec] = {}
+    for info in pkgutil.iter_modules(package.__path__):
+        module = importlib.import_module(f"{package.__name__}.{info.name}")
+        for value in vars(module).values():
+            if isinstance(value, ModelSpec) and not spec_problems(value):
+                if specs.get(value.name, value) is not value:
+                    raise RuntimeError(f"two built-in models are named {value.name!r}")
+                specs[value.name] = value
+    return specs
+
+
+@cache
+def discover() -> tuple[dict[str, ModelSpec], dict[str, str]]:
+    """All usable model options by name, and one-line problems of the plugins that are not."""
+    specs = dict(sorted(_builtin_specs().items()))
+    builtin = set(specs)
+    problems: dict[str, str] = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        where = f"entry point '{ep.name} = {ep.value}'" + (f" of {ep.dist.name}" if ep.dist else "")
+        if ep.name in builtin:
+            problems[ep.name] = f"model plugin {where} collides with the built-in model '{ep.name}'; rename it"
+            continue
+        try:
+            spec = ep.load()
+        except Exception as exc:  # a broken third-party package must not take quadest down
+            problems[ep.name] = f"model plugin {where} failed to import: {type(exc).__name__}: {exc}"
+            continue
+        issues = spec_problems(spec)
+        if not issues and spec.name != ep.name:
+            issues.append(f"its spec is named {spec.name!r}, not {ep.name!r} as its entry point")
+        if issues:
+            problems[ep.name] = f"model plugin {where} does not meet the contract: {'; '.join(issues)}"
+            continue
+        specs[ep.name] = spec
+    return specs, problems
 
 
 def model_specs() -> dict[str, ModelSpec]:
-    return {
-        "quadrotor": ModelSpec(
-            QuadrotorModelConf,
-            build_quadrotor_data,
-            lambda cfg: len(QuadrotorFilterModel.formulation_state_names(cfg.model.formulation)),
-            validate_quadrotor,
-            True,
-        ),
-        "linear": ModelSpec(LinearModelConf, build_linear_data, lambda cfg: 4, validate_linear),
-        "ungm": ModelSpec(UNGMModelConf, build_ungm_data, lambda cfg: 1, validate_ungm),
-        "upf_benchmark": ModelSpec(
-            UPFBenchmarkModelConf, build_upf_benchmark_data, lambda cfg: 1, validate_upf_benchmark
-        ),
-        "seed001_rates": ModelSpec(
-            Seed001RatesModelConf, build_seed001_rates_data, lambda cfg: 3, validate_seed001_rates, True
-        ),
-        "seed003_attitude": ModelSpec(
-            Seed003AttitudeModelConf, build_seed003_attitude_data, lambda cfg: 5, validate_seed003_attitude, True
-        ),
-        "attitude": ModelSpec(AttitudeModelConf, build_attitude_data, lambda cfg: 9, validate_attitude, True),  # n_err
-        "ins": ModelSpec(InsModelConf, build_ins_data, lambda cfg: 15, validate_ins, True),  # n_err
-    }
+    """Every usable model option by name: the package's own and the installed plugins'."""
+    return discover()[0]
+
+
+_warned: set[str] = set()
+
+
+def report_plugin_problems(selected: str) -> None:
+    """Refuse the selected model if it is a broken plugin; mention the other broken plugins once
+    per process on stderr."""
+    specs, problems = discover()
+    for name, message in problems.items():
+        if name == selected and name not in specs:
+            raise PluginError(name, message, key="model.name")
+        if message not in _warned:
+            _warned.add(message)
+            print(f"quadest: warning: {message}", file=sys.stderr)
+
+
+def model_spec(cfg) -> ModelSpec:
+    """The spec of ``cfg.model.name``.
+
+    Raises:
+        ConfigError: an unknown name (the message lists the options), or a broken plugin's.
+    """
+    name = cfg.model.name
+    report_plugin_problems(name)
+    specs = model_specs()
+    if name not in specs:
+        raise ConfigError("model.name", name, f"one of {sorted(specs)}")
+    return specs[name]
 
 
 def state_dimension(cfg) -> int:
     """State dimension of the configured filter model."""
-    return model_specs()[cfg.model.name].state_dimension(cfg)
+    return model_spec(cfg).state_dimension(cfg)
 
 
 def build_data(cfg) -> MonteCarloData:
@@ -78,4 +114,4 @@ def build_data(cfg) -> MonteCarloData:
         from quadest.replay.data import build_replay_data  # docs/replay.md
 
         return build_replay_data(cfg)
-    return model_specs()[cfg.model.name].build(cfg)
+    return model_spec(cfg).build(cfg)

@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from quadest.models.seed001_rates import RATES, ROTORS, RateModel
+from quadest.models.schemas import Seed001RatesModelConf
+from quadest.models.seed001_rates import RATES, ROTORS, RateModel, validate_seed001_rates
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.simulation.quadrotor_data import fly_scenario
+from quadest.simulation.spec import ModelSpec
 
 
 def propagate_rates(model: RateModel, start: np.ndarray, rotors: np.ndarray, noise: np.ndarray) -> np.ndarray:
@@ -47,3 +49,14 @@ def build_seed001_rates_data(cfg) -> MonteCarloData:
         draw_initial_estimates(rates[:, 0], P0, streams["initial"]), P0, np.zeros((runs, 0)),
         run_seed_sequences(seed, runs)["estimator"], labels,
     )  # fmt: skip
+
+
+MODEL = ModelSpec(
+    "seed001_rates",
+    Seed001RatesModelConf,
+    build_seed001_rates_data,
+    lambda cfg: 3,
+    validate_seed001_rates,
+    uses_quadrotor_groups=True,
+    pcrlb_is_bound=True,  # the rates are driven by the filter model's own N(0, Q) process noise
+)

@@ -5,16 +5,19 @@ from __future__ import annotations
 
 import numpy as np
 
+from quadest.models.schemas import Seed003AttitudeModelConf
 from quadest.models.seed003_attitude import (
     ROTORS,
     measure_states,
     seed003_filter_model,
     sensor_std,
     state_sensor_normals,
+    validate_seed003_attitude,
 )
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.simulation.quadrotor_data import fly_scenario
+from quadest.simulation.spec import ModelSpec
 
 
 def seed003_data(cfg, truth_state: np.ndarray, normals: np.ndarray, labels: dict) -> MonteCarloData:
@@ -46,3 +49,13 @@ def build_seed003_attitude_data(cfg) -> MonteCarloData:
     _params, flown, truth = fly_scenario(cfg, streams)
     normals = state_sensor_normals(streams, truth.state.shape[1])
     return seed003_data(cfg, truth.state, normals, seed003_labels(cfg, flown.name))
+
+
+MODEL = ModelSpec(
+    "seed003_attitude",
+    Seed003AttitudeModelConf,
+    build_seed003_attitude_data,
+    lambda cfg: 5,
+    validate_seed003_attitude,
+    uses_quadrotor_groups=True,
+)

@@ -7,10 +7,12 @@ import math
 
 import numpy as np
 
-from quadest.models.upf_benchmark import UPFBenchmarkModel
+from quadest.models.schemas import UPFBenchmarkModelConf
+from quadest.models.upf_benchmark import UPFBenchmarkModel, validate_upf_benchmark
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.data import sample_count
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.simulation.spec import ModelSpec
 from quadest.simulation.validation_data import simulation_labels
 
 
@@ -39,3 +41,8 @@ def build_upf_benchmark_data(cfg) -> MonteCarloData:
         np.full((runs, 1), float(m.x0)), np.array([[float(m.P0)]]), np.zeros((runs, 0)),
         run_seed_sequences(seed, runs)["estimator"], labels,
     )  # fmt: skip
+
+
+MODEL = ModelSpec(  # the truth's process noise is Gamma, not the Gaussian the recursion assumes: no bound
+    "upf_benchmark", UPFBenchmarkModelConf, build_upf_benchmark_data, lambda cfg: 1, validate_upf_benchmark
+)

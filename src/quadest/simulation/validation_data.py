@@ -6,14 +6,19 @@ run from the ``process`` and ``measurement`` streams.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from quadest.models.base import FilterModel
+from quadest.models.config_checks import validate_linear, validate_ungm
+from quadest.models.schemas import LinearModelConf, UNGMModelConf
 from quadest.models.validation import UNGMModel, constant_velocity_model
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.data import sample_count
 from quadest.montecarlo.initial import draw_initial_estimates, initial_covariance
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
+from quadest.simulation.spec import ModelSpec
 
 
 def _simulate(model: FilterModel, x0: np.ndarray, inputs: np.ndarray, streams) -> tuple[np.ndarray, np.ndarray]:
@@ -44,7 +49,23 @@ def simulation_labels(cfg) -> dict:
     }
 
 
-def _data(cfg, model, x0_true, x0_est, P0, inputs) -> MonteCarloData:
+def data_from_filter_model(
+    cfg: Any, model: FilterModel, x0_true: np.ndarray, x0_est: np.ndarray, P0: np.ndarray, inputs: np.ndarray
+) -> MonteCarloData:
+    """The Monte Carlo data of a model whose truth *is* its filter model (the validation models, a
+    plugin's small model, docs/models.md): ``x_k = f(x_{k−1}, u_{k−1}) + w_k``,
+    ``z_k = h(x_k, u_k) + v_k`` with ``w ~ N(0, Q)`` from each run's ``process`` stream and
+    ``v ~ N(0, R)`` from its ``measurement`` stream (:mod:`quadest.montecarlo.streams`), so the
+    PCRLB of ``model`` is a true bound.
+
+    Args:
+        cfg: the job config (``runs``, ``seed``, ``sample_period``; labels from ``model.name``).
+        model: the filter model bound to ``cfg.runs`` runs (``Q`` (n, n), ``R`` (m, m)).
+        x0_true: (B, n) true initial states.
+        x0_est: (B, n) the filters' initial estimates.
+        P0: (n, n) the filters' initial covariance.
+        inputs: (B, K+1, nu) the input at every sample (``nu`` may be 0).
+    """
     runs, seed = int(cfg.runs), int(cfg.seed)
     streams = run_streams(seed, runs)
     x, z = _simulate(model, x0_true, inputs, streams)
@@ -65,7 +86,7 @@ def build_linear_data(cfg) -> MonteCarloData:
     P0 = initial_covariance(std, float(cfg.model.initial_correlation))
     x0 = np.broadcast_to(np.array(list(cfg.model.initial_state), dtype=float), (runs, 4))
     est = draw_initial_estimates(x0, P0, run_streams(int(cfg.seed), runs)["initial"])
-    return _data(cfg, model, x0, est, P0, np.zeros((runs, K + 1, 0)))
+    return data_from_filter_model(cfg, model, x0, est, P0, np.zeros((runs, K + 1, 0)))
 
 
 def build_ungm_data(cfg) -> MonteCarloData:
@@ -79,4 +100,8 @@ def build_ungm_data(cfg) -> MonteCarloData:
     )
     inputs = np.broadcast_to(np.arange(K + 1, dtype=float)[None, :, None], (runs, K + 1, 1)).copy()
     est = np.full((runs, 1), float(m.m0))
-    return _data(cfg, model, x0, est, np.array([[float(m.P0)]]), inputs)
+    return data_from_filter_model(cfg, model, x0, est, np.array([[float(m.P0)]]), inputs)
+
+
+LINEAR = ModelSpec("linear", LinearModelConf, build_linear_data, lambda cfg: 4, validate_linear, pcrlb_is_bound=True)
+UNGM = ModelSpec("ungm", UNGMModelConf, build_ungm_data, lambda cfg: 1, validate_ungm, pcrlb_is_bound=True)

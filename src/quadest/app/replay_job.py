@@ -1,4 +1,5 @@
-"""The outputs of a log replay: the difference to the log's reference, where a simulation has errors.
+"""The replay job kind (``source`` set): a flight log's data, and the difference to the log's
+reference where a simulation has errors.
 
 A replay writes the files every job writes (docs/outputs.md), with three differences:
 
@@ -27,14 +28,15 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from quadest.evaluation.formatting import markdown_table, strict_json
-from quadest.evaluation.job_tables import MetricTables, estimator_entries
+from quadest.app.estimator_runs import OnData
+from quadest.app.pipeline import Finished, Report
+from quadest.evaluation.job_tables import MetricTables
 from quadest.evaluation.metrics import estimator_overview, parameter_columns, summarize
-from quadest.evaluation.paired import paired_comparison, paired_markdown, summary_lines
+from quadest.evaluation.paired import paired_comparison
 from quadest.models.attitude_figures import attitude_errors_deg
 from quadest.montecarlo import MonteCarloData
-from quadest.montecarlo.results import EstimatorResult
 from quadest.numerics import quaternion as quat
+from quadest.simulation.registry import build_data
 
 ANGLES = ("roll", "pitch", "yaw")
 QUANTITY = "difference to PX4"
@@ -127,65 +129,56 @@ def _save(fig: plt.Figure, title: str, path: Path) -> None:
     plt.close(fig)
 
 
-def write_replay_outputs(
-    cfg,
-    out_dir: Path,
-    data: MonteCarloData,
-    results: list[EstimatorResult],
-    params: dict,
-    header: dict,
-    from_cache: dict[str, bool],
-) -> dict:
-    """Write the job's files for a replay (module docstring) and return the JSON summary;
-    ``header`` holds the job's common summary keys (schema version, commit, overrides, cache)."""
-    reference = data.truth[0]
-    window = data.time >= data.time[0] + data.labels["warmup"]
-    # roll, pitch, yaw of the estimate minus PX4's, wrapped to ±180° (NaN once a run diverged)
-    diffs = {res.name: attitude_errors_deg(res.saved["estimate"][0], reference)[:, 1:] for res in results}
-    table = _table(results, diffs, window, data, params, cfg)
-    summary_table = summarize(table).assign(pooled_rmse=lambda s: s["rmse_mean"], pcrlb=np.nan)
-    with warnings.catch_warnings():  # NaN NEES everywhere, and NIS for filters without innovations
-        warnings.simplefilter("ignore", RuntimeWarning)
-        overview = estimator_overview(results, data.model.n_err, data.model.m)
-    overview = overview.drop(columns=["mean_nees", "nees_dof", "nees_in_band"])
-    table.to_csv(out_dir / "metrics.csv", index=False)
-    summary_table.to_csv(out_dir / "rmse_summary.csv", index=False)
-    printed = _printed(summary_table)
-    paired = paired_comparison(table, int(cfg.seed))
-    paired.to_csv(out_dir / "paired_comparison.csv", index=False)
-    (out_dir / "rmse_table.md").write_text(
-        caption(data) + "\n\n" + markdown_table(printed) + "\n" + markdown_table(overview.round(4))
-        + paired_markdown(paired)
-    )  # fmt: skip
-    ref_angles = euler_deg(reference)
-    angles = {res.name: euler_deg(res.saved["estimate"][0]) for res in results}
-    arrays = {"time": data.time, "reference": reference, "reference_angles_deg": ref_angles}
-    for res in results:
-        arrays[f"{res.name}/estimate"] = res.saved["estimate"]
-        arrays[f"{res.name}/std"] = res.saved["std"]
-        arrays[f"{res.name}/angles_deg"] = angles[res.name]
-    np.savez_compressed(out_dir / "timeseries.npz", **arrays)
-    if cfg.output.figures:
-        fig_dir = out_dir / "figures"
-        fig_dir.mkdir(exist_ok=True)
-        plot_replay(data, angles, ref_angles, fig_dir)
+class ReplayJob:
+    """:class:`~quadest.app.pipeline.JobKind` of a flight-log replay."""
 
-    summary = {
-        **header,
-        "labels": {**data.labels, "seed": int(cfg.seed), "runs": 1, "duration": float(data.time[-1]),
-                   "sample_period": float(cfg.sample_period)},
-        "reference": data.labels["reference"],
-        "compared_from": float(data.labels["warmup"]),
-        "not_applicable": NOT_APPLICABLE,
-        "state_names": list(ANGLES),
-        "companion_names": [],
-        "measurement_names": list(data.model.measurement_names),
-        "estimators": {},
-    }  # fmt: skip
-    tables = MetricTables(table, summary_table, overview, printed, paired)
-    summary["estimators"] = estimator_entries(results, tables, params, from_cache)
-    (out_dir / "summary.json").write_text(strict_json(summary, indent=2))
-    summary["_table"] = printed
-    summary["_paired"] = summary_lines(paired)
-    summary["_caption"] = caption(data)
-    return summary
+    caches_data = True
+
+    def __init__(self, cfg) -> None:
+        self.cfg = cfg
+
+    def make_data(self) -> MonteCarloData:
+        return build_data(self.cfg)
+
+    def work(self, data: MonteCarloData) -> OnData:
+        return OnData(data)
+
+    def report(self, finished: Finished) -> Report:
+        """The tables, time series and summary fields of the module docstring; draws the figures."""
+        cfg, data, params = self.cfg, finished.data, finished.rows.params
+        results = finished.rows.results
+        reference = data.truth[0]
+        window = data.time >= data.time[0] + data.labels["warmup"]
+        # roll, pitch, yaw of the estimate minus PX4's, wrapped to ±180° (NaN once a run diverged)
+        diffs = {res.name: attitude_errors_deg(res.saved["estimate"][0], reference)[:, 1:] for res in results}
+        table = _table(results, diffs, window, data, params, cfg)
+        summary_table = summarize(table).assign(pooled_rmse=lambda s: s["rmse_mean"], pcrlb=np.nan)
+        with warnings.catch_warnings():  # NaN NEES everywhere, and NIS for filters without innovations
+            warnings.simplefilter("ignore", RuntimeWarning)
+            overview = estimator_overview(results, data.model.n_err, data.model.m)
+        overview = overview.drop(columns=["mean_nees", "nees_dof", "nees_in_band"])
+        printed = _printed(summary_table)
+        paired = paired_comparison(table, int(cfg.seed))
+        tables = MetricTables(table, summary_table, overview, printed, paired, preamble=caption(data) + "\n\n")
+        ref_angles = euler_deg(reference)
+        angles = {res.name: euler_deg(res.saved["estimate"][0]) for res in results}
+        arrays = {"time": data.time, "reference": reference, "reference_angles_deg": ref_angles}
+        for res in results:
+            arrays[f"{res.name}/estimate"] = res.saved["estimate"]
+            arrays[f"{res.name}/std"] = res.saved["std"]
+            arrays[f"{res.name}/angles_deg"] = angles[res.name]
+        if cfg.output.figures:
+            fig_dir = finished.out_dir / "figures"
+            fig_dir.mkdir(exist_ok=True)
+            plot_replay(data, angles, ref_angles, fig_dir)
+        fields = {
+            "labels": {**data.labels, "seed": int(cfg.seed), "runs": 1, "duration": float(data.time[-1]),
+                       "sample_period": float(cfg.sample_period)},
+            "reference": data.labels["reference"],
+            "compared_from": float(data.labels["warmup"]),
+            "not_applicable": NOT_APPLICABLE,
+            "state_names": list(ANGLES),
+            "companion_names": [],
+            "measurement_names": list(data.model.measurement_names),
+        }  # fmt: skip
+        return Report(tables, fields, arrays, caption(data))

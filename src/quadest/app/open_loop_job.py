@@ -1,0 +1,86 @@
+"""The open-loop job kind (``loop: open``, no ``source``): simulated Monte Carlo data, every
+estimator on the same data, errors against its truth (``docs/outputs.md``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from quadest.app.estimator_runs import OnData
+from quadest.app.pipeline import Finished, Report
+from quadest.evaluation.job_tables import metric_tables
+from quadest.evaluation.metrics import convergence_table
+from quadest.evaluation.pcrlb import pcrlb_variances
+from quadest.evaluation.plotting import (
+    plot_consistency,
+    plot_errors,
+    plot_extra_figures,
+    plot_rmse_vs_time,
+    plot_truth_vs_estimate,
+)
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.results import EstimatorResult
+from quadest.simulation.registry import build_data
+
+
+class OpenLoopJob:
+    """:class:`~quadest.app.pipeline.JobKind` of the open loop."""
+
+    caches_data = True
+
+    def __init__(self, cfg) -> None:
+        self.cfg = cfg
+
+    def make_data(self) -> MonteCarloData:
+        return build_data(self.cfg)
+
+    def work(self, data: MonteCarloData) -> OnData:
+        return OnData(data)
+
+    def report(self, finished: Finished) -> Report:
+        cfg, data, out_dir = self.cfg, finished.data, finished.out_dir
+        results = finished.rows.results
+        bound = finished.derived("pcrlb", lambda: pcrlb_variances(data))
+        labels = {"seed": int(cfg.seed), "runs": int(cfg.runs)}
+        tables = metric_tables(results, data, finished.rows.params, labels, bound, int(cfg.seed))
+        if data.model.bias_states:
+            convergence_table(results, data).to_csv(out_dir / "convergence.csv", index=False)
+        arrays = {}
+        if finished.saved_runs:
+            arrays = series(data, results, finished.saved_runs)
+            if cfg.output.figures:
+                self._figures(data, results, arrays, bound, out_dir / "figures")
+        fields = {
+            "labels": {**data.labels, "seed": int(cfg.seed), "runs": int(cfg.runs),
+                       "duration": float(cfg.duration), "sample_period": float(cfg.sample_period)},
+            "state_names": list(data.model.state_names),
+            "error_names": list(data.model.error_names),
+            "companion_names": list(data.model.companion_names),
+            "measurement_names": list(data.model.measurement_names),
+        }  # fmt: skip
+        return Report(tables, fields, arrays)
+
+    def _figures(
+        self, data: MonteCarloData, results: list[EstimatorResult], arrays: dict, bound: np.ndarray, fig_dir: Path
+    ) -> None:
+        fig_dir.mkdir(exist_ok=True)
+        ran = [r for r in results if r.saved["estimate"].shape[0]]
+        plot_truth_vs_estimate(data, ran, fig_dir / "truth_vs_estimate.png")
+        if self.cfg.output.per_estimator_figures:
+            for res in ran:
+                plot_truth_vs_estimate(data, [res], fig_dir / f"truth_vs_estimate_{res.name}.png")
+        plot_errors(data, ran, fig_dir / "errors_3sigma.png", bound)
+        plot_rmse_vs_time(data, results, bound, fig_dir / "rmse_vs_time.png")
+        plot_consistency(data, results, fig_dir / "consistency.png")
+        plot_extra_figures(data.model, arrays, fig_dir)
+
+
+def series(data: MonteCarloData, results: list[EstimatorResult], saved_runs: int) -> dict[str, np.ndarray]:
+    """``timeseries.npz`` of an open-loop job: time, the truth of the first runs and each
+    estimator's saved series."""
+    arrays = {"time": data.time, "truth": data.truth[:saved_runs], "companion_truth": data.companion_truth[:saved_runs]}
+    for res in results:
+        for key, value in res.saved.items():
+            arrays[f"{res.name}/{key}"] = value
+    return arrays

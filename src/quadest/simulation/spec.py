@@ -1,0 +1,67 @@
+"""What a ``model=`` option is: one :class:`ModelSpec`, registered once (docs/models.md).
+
+A model option is its config schema, the dimension of its filter's (error) state, its range
+checks, its Monte Carlo data builder and whether the PCRLB of its filter model bounds the
+filters' MSE. The registry (:mod:`quadest.simulation.registry`) finds the package's own specs in
+the modules of :mod:`quadest.simulation` and a plugin's through the entry-point group
+``quadest.models``; everything else (the ``/schema/model/<name>`` config store, the pre-run
+checks, the PCRLB caption) reads the spec.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from quadest.montecarlo import MonteCarloData
+
+
+def _no_checks(cfg: Any) -> None:
+    """A model without range checks beyond its schema's types."""
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """One ``model=<name>`` option.
+
+    Attributes:
+        name: the option's name: ``model.name`` and the YAML ``conf/model/<name>.yaml``.
+        schema: the dataclass of the ``model`` node, stored as ``/schema/model/<name>`` (the
+            YAML's default); it must have a ``name`` field.
+        build: ``build(cfg) -> MonteCarloData``, the data of ``cfg.runs`` runs.
+        state_dimension: ``state_dimension(cfg) -> int``, the dimension of the filter's error
+            state (``n_err``; ``n`` for vector states), against which estimator parameters are
+            checked before any work (the UT's ``n + λ > 0``).
+        validate: ``validate(cfg)`` raises :class:`~quadest.errors.ConfigError` naming the key of
+            the first value out of range (the schema already checks types and keys).
+        uses_quadrotor_groups: the data flies the shared quadrotor, so the ``sensor`` and
+            ``scenario`` groups are checked too.
+        pcrlb_is_bound: the truth is drawn from the filter model itself with its own noise, so the
+            posterior Cramér–Rao recursion (:mod:`quadest.evaluation.pcrlb`) is a true floor on
+            the MSE; otherwise it is reported as a reference only.
+    """
+
+    name: str
+    schema: type
+    build: Callable[[Any], MonteCarloData]
+    state_dimension: Callable[[Any], int]
+    validate: Callable[[Any], None] = _no_checks
+    uses_quadrotor_groups: bool = False
+    pcrlb_is_bound: bool = False
+
+
+def spec_problems(spec: Any) -> list[str]:
+    """What keeps ``spec`` from being a usable model option (empty when it is one)."""
+    if not isinstance(spec, ModelSpec):
+        return [f"{spec!r} is not a quadest.simulation.spec.ModelSpec"]
+    problems = []
+    if not (isinstance(spec.schema, type) and dataclasses.is_dataclass(spec.schema)):
+        problems.append("its schema must be a dataclass")
+    elif "name" not in {f.name for f in dataclasses.fields(spec.schema)}:
+        problems.append("its schema must have a 'name' field")
+    for member in ("build", "state_dimension", "validate"):
+        if not callable(getattr(spec, member)):
+            problems.append(f"its {member} must be callable")
+    return problems
