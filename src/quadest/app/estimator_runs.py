@@ -31,6 +31,7 @@ from tqdm.auto import tqdm
 from quadest.cache.lookup import JobCache
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator, resolve
+from quadest.estimators.smoother_settings import smoother_settings
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult, failed_result
 from quadest.runner import run_estimator
@@ -74,8 +75,9 @@ class OnData:
     def run(self, label: str, node: dict, settings: RunSettings) -> EstimatorResult:
         data = self.data
         est = build_estimator(label, node, data.model)
+        smoother = smoother_settings(label, node, resolve(label, node)[0])
         return run_estimator(label, est, data, settings.divergence_bound, settings.saved_runs, settings.progress,
-                             crashes=self.crashes)  # fmt: skip
+                             crashes=self.crashes, smoother=smoother)  # fmt: skip
 
     def failed(self, label: str, reason: str, settings: RunSettings) -> EstimatorResult:
         return failed_result(label, self.data, reason)

@@ -45,8 +45,16 @@ class TableRows:
 
 def table_rows(results: list[EstimatorResult], params: dict[str, dict], from_cache: dict[str, bool]) -> TableRows:
     """The one place that turns the estimators' results (one per estimator, in the job's order)
-    into rows: today one row per estimator."""
-    return TableRows(list(results), dict(params), dict(from_cache))
+    into rows: one row per estimator, followed by its smoothed row when it has a smoother
+    (``<label>+smoothed`` / ``<label>+lag<L>``, with the estimator's parameters and cache flag)."""
+    rows, row_params, row_cache = [], dict(params), dict(from_cache)
+    for result in results:
+        rows.append(result)
+        if result.smoothed is not None:
+            rows.append(result.smoothed)
+            row_params[result.smoothed.name] = row_params.get(result.name, {})
+            row_cache[result.smoothed.name] = row_cache.get(result.name, False)
+    return TableRows(rows, row_params, row_cache)
 
 
 @dataclass

@@ -14,6 +14,7 @@ from quadest.config.ranges import require_non_negative, require_positive
 from quadest.errors import ConfigError
 from quadest.estimators.params import parameter_problem
 from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
+from quadest.estimators.smoother_settings import smoother_settings
 from quadest.numerics.square_root import requested_kernels
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import validate_replay
@@ -92,6 +93,12 @@ def validate_estimators(cfg) -> None:
         if problem is not None:
             key, value, allowed = problem
             raise ConfigError(f"estimator.{label}.{key}", value, allowed)
+        if smoother_settings(label, node, cls) is not None and cfg.get("loop") == "estimate":
+            raise ConfigError(
+                f"estimator.{label}.smoother",
+                node.get("smoother"),
+                "none with loop=estimate (each estimator flies its own truth; smooth with loop=truth or measured)",
+            )
 
 
 def validate(cfg) -> None:

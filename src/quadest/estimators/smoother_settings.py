@@ -11,6 +11,7 @@ estimator's constructor parameters and not its parameter columns; the job reads 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
@@ -80,10 +81,15 @@ def smoother_settings(label: str, node: Mapping[str, Any], cls: type) -> Smoothe
     return SmootherSettings(kind, lag, trajectories)
 
 
+_PREFIX = "SmootherSchema"
+
+
 @cache
 def with_smoother_keys(params: type) -> type:
     """The config schema of an estimator: its ``Params`` dataclass plus the reserved smoother keys
-    (a subclass of the same name, so Hydra types the node and refuses unknown keys)."""
+    (a subclass, so Hydra types the node and refuses unknown keys). It is an attribute of this
+    module under a name that encodes ``params``' module and name, so it pickles (worker processes,
+    launchers) and unpickles in a process that has not built it yet (:func:`__getattr__`)."""
     schema = dataclasses.make_dataclass(
         params.__name__,
         [
@@ -92,5 +98,15 @@ def with_smoother_keys(params: type) -> type:
         ],
         bases=(params,),
     )
-    schema.__module__, schema.__qualname__ = params.__module__, params.__qualname__
+    schema.__module__ = __name__
+    schema.__qualname__ = "__".join([_PREFIX, *params.__module__.split("."), params.__qualname__])
     return schema
+
+
+def __getattr__(name: str) -> type:
+    """The schema :func:`with_smoother_keys` made for the ``Params`` its ``name`` encodes."""
+    parts = name.split("__")
+    if len(parts) < 3 or parts[0] != _PREFIX:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    params = getattr(importlib.import_module(".".join(parts[1:-1])), parts[-1])
+    return with_smoother_keys(params)
