@@ -199,7 +199,7 @@ def test_broken_sensor_plugins_are_reported(broken_site, monkeypatch):
         assert "collides with the built-in sensor 'gps'" in problems["gps"]
         assert "failed to import: ModuleNotFoundError" in problems["broken"]
         assert "must subclass quadest.sensors.base.Sensor" in problems["notasensor"]
-        assert "config_name is 'rangefinder', not 'misnamed'" in problems["misnamed"]
+        assert "named 'rangefinder', not 'misnamed'" in problems["misnamed"]
         assert all("fake-sensors" in message and "\n" not in message for message in problems.values())
     finally:
         registry.discover.cache_clear()

@@ -28,7 +28,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from quadest.app.estimator_runs import OnData
+from quadest.app.open_loop_job import OpenLoopJob
 from quadest.app.pipeline import Finished, Report
 from quadest.evaluation.job_tables import MetricTables
 from quadest.evaluation.metrics import estimator_overview, parameter_columns, summarize
@@ -36,7 +36,6 @@ from quadest.evaluation.paired import paired_comparison
 from quadest.models.attitude_figures import attitude_errors_deg
 from quadest.montecarlo import MonteCarloData
 from quadest.numerics import quaternion as quat
-from quadest.simulation.registry import build_data
 
 ANGLES = ("roll", "pitch", "yaw")
 QUANTITY = "difference to PX4"
@@ -129,19 +128,9 @@ def _save(fig: plt.Figure, title: str, path: Path) -> None:
     plt.close(fig)
 
 
-class ReplayJob:
-    """:class:`~quadest.app.pipeline.JobKind` of a flight-log replay."""
-
-    caches_data = True
-
-    def __init__(self, cfg) -> None:
-        self.cfg = cfg
-
-    def make_data(self) -> MonteCarloData:
-        return build_data(self.cfg)
-
-    def work(self, data: MonteCarloData) -> OnData:
-        return OnData(data)
+class ReplayJob(OpenLoopJob):
+    """:class:`~quadest.app.pipeline.JobKind` of a flight-log replay: the open loop's data and work
+    (the log is the data), its own report."""
 
     def report(self, finished: Finished) -> Report:
         """The tables, time series and summary fields of the module docstring; draws the figures."""

@@ -18,8 +18,8 @@ import importlib
 import inspect
 import pkgutil
 from functools import cache
-from importlib.metadata import entry_points
 
+from quadest.config.plugin_entry_points import load_entry_points
 from quadest.sensors.base import Sensor, sensor_problems
 
 ENTRY_POINT_GROUP = "quadest.sensors"
@@ -41,27 +41,13 @@ def _builtin_sensors() -> dict[str, type[Sensor]]:
 @cache
 def discover() -> tuple[dict[str, type[Sensor]], dict[str, str]]:
     """All usable sensors by name, and one-line problems of the plugins that are not."""
-    sensors = dict(sorted(_builtin_sensors().items()))
-    builtin = set(sensors)
-    problems: dict[str, str] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        where = f"entry point '{ep.name} = {ep.value}'" + (f" of {ep.dist.name}" if ep.dist else "")
-        if ep.name in builtin:
-            problems[ep.name] = f"sensor plugin {where} collides with the built-in sensor '{ep.name}'; rename it"
-            continue
-        try:
-            cls = ep.load()
-        except Exception as exc:  # a broken third-party package must not take quadest down
-            problems[ep.name] = f"sensor plugin {where} failed to import: {type(exc).__name__}: {exc}"
-            continue
-        issues = sensor_problems(cls)
-        if not issues and cls.config_name != ep.name:
-            issues.append(f"its config_name is {cls.config_name!r}, not {ep.name!r} as its entry point")
-        if issues:
-            problems[ep.name] = f"sensor plugin {where} does not meet the contract: {'; '.join(issues)}"
-            continue
-        sensors[ep.name] = cls
-    return sensors, problems
+    return load_entry_points(
+        ENTRY_POINT_GROUP,
+        "sensor",
+        dict(sorted(_builtin_sensors().items())),
+        sensor_problems,
+        lambda cls: cls.config_name,
+    )
 
 
 def sensor_classes() -> dict[str, type[Sensor]]:

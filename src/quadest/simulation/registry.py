@@ -20,8 +20,8 @@ import importlib
 import pkgutil
 import sys
 from functools import cache
-from importlib.metadata import entry_points
 
+from quadest.config.plugin_entry_points import load_entry_points
 from quadest.errors import ConfigError, PluginError
 from quadest.montecarlo import MonteCarloData
 from quadest.simulation.spec import ModelSpec, spec_problems
@@ -46,27 +46,9 @@ def _builtin_specs() -> dict[str, ModelSpec]:
 @cache
 def discover() -> tuple[dict[str, ModelSpec], dict[str, str]]:
     """All usable model options by name, and one-line problems of the plugins that are not."""
-    specs = dict(sorted(_builtin_specs().items()))
-    builtin = set(specs)
-    problems: dict[str, str] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        where = f"entry point '{ep.name} = {ep.value}'" + (f" of {ep.dist.name}" if ep.dist else "")
-        if ep.name in builtin:
-            problems[ep.name] = f"model plugin {where} collides with the built-in model '{ep.name}'; rename it"
-            continue
-        try:
-            spec = ep.load()
-        except Exception as exc:  # a broken third-party package must not take quadest down
-            problems[ep.name] = f"model plugin {where} failed to import: {type(exc).__name__}: {exc}"
-            continue
-        issues = spec_problems(spec)
-        if not issues and spec.name != ep.name:
-            issues.append(f"its spec is named {spec.name!r}, not {ep.name!r} as its entry point")
-        if issues:
-            problems[ep.name] = f"model plugin {where} does not meet the contract: {'; '.join(issues)}"
-            continue
-        specs[ep.name] = spec
-    return specs, problems
+    return load_entry_points(
+        ENTRY_POINT_GROUP, "model", dict(sorted(_builtin_specs().items())), spec_problems, lambda spec: spec.name
+    )
 
 
 def model_specs() -> dict[str, ModelSpec]:
