@@ -23,7 +23,7 @@ from quadest.estimators.error_state_ekf import ErrorStateEKF
 from quadest.estimators.registry import build_estimator, resolve
 from quadest.estimators.smoother_settings import SmootherSettings, smoother_settings
 from quadest.estimators.smoothing import SmootherStep
-from quadest.runner import run_estimator
+from quadest.runner import run_estimator, smoother_seed
 from quadest.simulation.registry import build_data
 
 LINEAR = ["model=linear", "sample_period=0.1", "duration=4.0", "progress=false"]
@@ -194,3 +194,14 @@ def test_the_command_prints_smoothed_rows_beside_the_filtered_ones(tmp_path):
     summary = (out / "rmse_summary.csv").read_text()
     assert "srukf+smoothed" in summary and "ekf+smoothed" not in summary
     assert "srukf+smoothed" in (out / "summary.json").read_text()
+
+
+def test_the_particle_smoothers_draws_are_per_run_and_apart_from_the_filters():
+    """Each run's backward draws come from its own child of its estimator seed: two runs never
+    share them, and they are not the filter's own stream."""
+    seeds = build_data(compose_config(["model=ungm", "runs=3", "duration=2"])).estimator_seeds
+    first = [np.random.default_rng(smoother_seed(s)).random(4) for s in seeds]
+    assert not any(np.array_equal(a, b) for i, a in enumerate(first) for b in first[i + 1 :])
+    for seed, draws in zip(seeds, first, strict=True):
+        assert not np.array_equal(np.random.default_rng(seed).random(4), draws)
+        np.testing.assert_array_equal(np.random.default_rng(smoother_seed(seed)).random(4), draws)

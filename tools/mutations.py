@@ -483,8 +483,8 @@ MUTATIONS = (
     Mutation(
         "smoothed covariance without the next step's smoothed covariance",
         "src/quadest/estimators/smoothing.py",
-        "P = step.residual + G @ spread_next @ _t(G)",
-        "P = step.residual + spread_next",
+        "return symmetric(step.residual + G @ spread_next @ _t(G))",
+        "return symmetric(step.residual + spread_next)",
         (SMOOTHERS + "test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model[cov-ut]",),
     ),
     Mutation(

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadest.models.base import FilterModel
+from quadest.numerics.resampling import draw_uniforms
 
 
 @dataclass(frozen=True)
@@ -59,12 +60,9 @@ def ffbsi(
     B, _, n = clouds[-1].particles.shape
     M = int(trajectories)
 
-    def uniforms() -> np.ndarray:
-        return np.stack([rng.random(M) for rng in rngs])
-
     last = clouds[-1]
     final_weights = np.broadcast_to(last.weights[:, None, :], (B, M, last.weights.shape[1]))
-    drawn = _pick(last.particles, _categorical(final_weights, uniforms()))
+    drawn = _pick(last.particles, _categorical(final_weights, draw_uniforms("multinomial", rngs, M)))
     means = np.empty((K, B, n))
     covs = np.empty((K, B, n, n))
     for k in range(K - 1, -1, -1):
@@ -78,7 +76,7 @@ def ffbsi(
             if lost.any():  # it continues from the filter's weights alone
                 log_b[lost] = np.log(np.broadcast_to(cloud.weights[:, None, :], log_b.shape)[lost])
             log_b -= log_b.max(axis=-1, keepdims=True)
-            drawn = _pick(cloud.particles, _categorical(np.exp(log_b), uniforms()))
+            drawn = _pick(cloud.particles, _categorical(np.exp(log_b), draw_uniforms("multinomial", rngs, M)))
         means[k] = drawn.mean(axis=1)
         d = drawn - means[k][:, None, :]
         covs[k] = np.einsum("bmi,bmj->bij", d, d) / M

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quadest.estimators.gaussian_steps import joseph_covariance
+from quadest.estimators.gaussian_steps import joseph_covariance, symmetric
 from quadest.numerics import kalman_gain, qr_factor
 from quadest.numerics.rules import IntegrationRule
 
@@ -75,8 +75,7 @@ class SmoothingForm:
         G = step.gain
         if self.square_root:
             return qr_factor(np.concatenate([step.residual, G @ spread_next], axis=-1))
-        P = step.residual + G @ spread_next @ _t(G)
-        return 0.5 * (P + _t(P))
+        return symmetric(step.residual + G @ spread_next @ _t(G))
 
     def correct(self, filtered: np.ndarray, step: SmootherStep, smoothed_next: np.ndarray, spread: np.ndarray):
         """Smoothed mean ``x̂_{k|k} ⊞ G (x̂_{k+1|K} ⊟ x̂⁻_{k+1})`` and the spread, reset if asked."""
