@@ -292,3 +292,42 @@ def test_replay_writes_the_outputs_of_every_job_with_differences_to_px4(replay_o
     assert not metrics["diverged"].any()
     assert summary["reference"] == "PX4 onboard estimate" and "not reported" in summary["_caption"]
     assert all(e["mean_nees"] is None for e in summary["estimators"].values())
+
+
+@pytest.fixture(scope="module")
+def smoothed_replay_outputs(tmp_path_factory):
+    from quadest.app.job import run_job
+
+    out = tmp_path_factory.mktemp("px4_replay_smoothed")
+    overrides = ["experiment=px4_replay_smoothed", "duration=20", "progress=false", "workers=1", "cache.enabled=false"]
+    return out, run_job(_replay_config(overrides), out, overrides)
+
+
+def test_smoothed_replay_writes_every_rows_difference_to_the_offline_reference(smoothed_replay_outputs):
+    """The offline reference's table (docs/replay.md): one line per other row (PX4's estimate
+    included) and angle. Two independent checks: PX4's RMS difference to the smoothed MEKF is the
+    smoothed row's "difference to PX4" of rmse_summary.csv, computed by another path (the Euler
+    differences of attitude_errors_deg, the other way round); and the filter's own difference is
+    the RMS of its saved angles minus the smoothed row's over the compared window, wrapped."""
+    out, summary = smoothed_replay_outputs
+    table = pd.read_csv(out / "difference_to_smoothed.csv")
+    assert set(table["reference"]) == {"mekf+smoothed"}
+    rows = {"mekf", "madgwick", "mahony", "ahrs_ekf", "PX4 onboard estimate"}
+    assert set(table["estimator"]) == rows and len(table) == 3 * len(rows)
+    to_px4 = pd.read_csv(out / "rmse_summary.csv").set_index(["estimator", "state"])["rmse_mean"]
+    diff = table.set_index(["estimator", "state"])["rms_difference"]
+    for angle in ("roll", "pitch", "yaw"):
+        np.testing.assert_allclose(diff["PX4 onboard estimate", angle], to_px4["mekf+smoothed", angle], rtol=1e-9)
+    series = np.load(out / "timeseries.npz")
+    window = series["time"] >= series["time"][0] + summary["compared_from"]
+    wrapped = (series["mekf/angles_deg"] - series["mekf+smoothed/angles_deg"] + 180.0) % 360.0 - 180.0
+    rms = np.sqrt(np.mean(wrapped[window] ** 2, axis=0))
+    np.testing.assert_allclose([diff["mekf", a] for a in ("roll", "pitch", "yaw")], rms, rtol=1e-12)
+    assert summary["difference_to_smoothed"]["mekf+smoothed"]["mekf"]["yaw"] == pytest.approx(diff["mekf", "yaw"])
+    assert (out / "figures" / "difference_to_smoothed.png").is_file()
+    assert "RMS difference to mekf+smoothed" in summary["_after_table"]
+
+
+def test_a_replay_without_a_smoother_writes_no_offline_reference(replay_outputs):
+    out, summary = replay_outputs
+    assert not (out / "difference_to_smoothed.csv").exists() and "difference_to_smoothed" not in summary

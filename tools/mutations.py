@@ -537,6 +537,20 @@ MUTATIONS = (
         (SMOOTHING_RUNS + "test_the_mekf_smoother_resets_its_covariance_as_the_filter_does[True]",),
     ),
     Mutation(
+        "replay: difference to the offline reference over the warm-up too",
+        "src/quadest/app/replay_job.py",
+        "            for j, rms in enumerate(rms_difference(diff, window)):",
+        "            for j, rms in enumerate(rms_difference(diff, np.ones_like(window))):",
+        ("tests/test_replay.py::test_smoothed_replay_writes_every_rows_difference_to_the_offline_reference",),
+    ),
+    Mutation(
+        "replay: PX4's estimate left out of the offline reference's table",
+        "src/quadest/app/replay_job.py",
+        "        to_smoothed = difference_to_smoothed({**angles, PX4: ref_angles}, offline, window)",
+        "        to_smoothed = difference_to_smoothed(angles, offline, window)",
+        ("tests/test_replay.py::test_smoothed_replay_writes_every_rows_difference_to_the_offline_reference",),
+    ),
+    Mutation(
         "a model plugin's PCRLB flag ignored (a known list again)",
         "src/quadest/evaluation/pcrlb.py",
         "return spec is not None and spec.pcrlb_is_bound",

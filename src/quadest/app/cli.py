@@ -70,6 +70,8 @@ def _main(cfg: DictConfig) -> float | None:
         f"excluded).\n{pcrlb_caption(cfg.model.name)}"
     )
     print(summary["_table"].to_string(index=False))
+    if "_after_table" in summary:
+        print(f"\n{summary['_after_table']}", end="")
     # NEES dof: the error state's (a closed-loop or replay summary has vector states, no error_names)
     n, m = len(summary.get("error_names", summary["state_names"])), len(summary["measurement_names"])
     for name, est in summary["estimators"].items():

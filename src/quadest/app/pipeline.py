@@ -85,6 +85,8 @@ class Report:
     """``timeseries.npz`` (none if empty)."""
     caption: str | None = None
     """Printed above the table (``None``: the CLI's default caption)."""
+    after_table: str | None = None
+    """Printed below the table (the replay's differences to its offline reference)."""
 
 
 class JobKind(Protocol):
@@ -111,7 +113,8 @@ class JobKind(Protocol):
 def run_pipeline(kind: JobKind, cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
     """Run one job of ``kind`` with the validated config ``cfg`` and write every output into
     ``out_dir``. Returns the JSON summary, with the printed table (``_table``), the paired lines
-    (``_paired``) and, where the kind has one, the caption (``_caption``) for the CLI."""
+    (``_paired``) and, where the kind has them, the caption (``_caption``) and the text below the
+    table (``_after_table``) for the CLI."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
@@ -141,6 +144,8 @@ def run_pipeline(kind: JobKind, cfg, out_dir: Path, overrides: list[str] | None 
     summary["_paired"] = summary_lines(report.tables.paired)
     if report.caption is not None:
         summary["_caption"] = report.caption
+    if report.after_table is not None:
+        summary["_after_table"] = report.after_table
     return summary
 
 

@@ -14,6 +14,14 @@ A replay writes the files every job writes (docs/outputs.md), with three differe
 
 Figures: ``figures/attitude_vs_px4.png`` (roll, pitch, yaw of every filter and of PX4 against
 time) and ``figures/difference_to_px4.png`` (the differences, the warm-up shaded).
+
+An offline reference of our own: an estimator with a fixed-interval smoother (``smoother:
+fixed_interval``, docs/smoothers.md) gives a row ``<label>+smoothed`` that uses the whole log. The
+job then also writes ``difference_to_smoothed.csv`` and ``difference_to_smoothed.md``: the RMS
+difference (degrees, over the same window) of every other row and of PX4's own estimate to each
+smoothed row, that is how far each online filter is from the best estimate these measurements
+allow under our models; and ``figures/difference_to_smoothed.png``. ``summary.json`` holds the
+same numbers under ``difference_to_smoothed``.
 """
 
 from __future__ import annotations
@@ -30,15 +38,19 @@ import pandas as pd
 
 from quadest.app.open_loop_job import OpenLoopJob
 from quadest.app.pipeline import Finished, Report
+from quadest.evaluation.formatting import markdown_table
 from quadest.evaluation.job_tables import MetricTables
 from quadest.evaluation.metrics import estimator_overview, parameter_columns, summarize
 from quadest.evaluation.paired import paired_comparison
 from quadest.models.attitude_figures import attitude_errors_deg
 from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.results import EstimatorResult
 from quadest.numerics import quaternion as quat
 
 ANGLES = ("roll", "pitch", "yaw")
 QUANTITY = "difference to PX4"
+PX4 = "PX4 onboard estimate"
+SMOOTHED = "+smoothed"
 NOT_APPLICABLE = (
     "NEES and PCRLB are not reported: they need the true state, and a flight log has none "
     "(PX4's onboard estimate is a reference, not the truth)."
@@ -88,6 +100,44 @@ def _printed(summary: pd.DataFrame) -> pd.DataFrame:
     return wide.reset_index().rename(columns={"row": "state"})
 
 
+def offline_references(results: list[EstimatorResult]) -> list[EstimatorResult]:
+    """The fixed-interval smoothed rows among ``results`` (``<label>+smoothed``), in order: each
+    used the whole log, so it is an offline reference for the online rows."""
+    return [res.smoothed for res in results if res.smoothed is not None and res.smoothed.name.endswith(SMOOTHED)]
+
+
+def difference_to_smoothed(angles: dict[str, np.ndarray], references: list[str], window: np.ndarray) -> pd.DataFrame:
+    """The RMS difference in degrees over ``window`` of every row of ``angles`` (name → roll,
+    pitch, yaw (K, 3) in degrees; PX4's estimate included) to each reference row: one line per
+    reference, other row and angle, the differences wrapped to ±180°."""
+    lines = []
+    for reference in references:
+        for name, a in angles.items():
+            if name == reference:
+                continue
+            diff = wrap_deg(a - angles[reference])
+            for j, rms in enumerate(rms_difference(diff, window)):
+                lines.append({"reference": reference, "estimator": name, "state": ANGLES[j], "unit": "deg",
+                              "rms_difference": float(rms)})  # fmt: skip
+    return pd.DataFrame(lines, columns=["reference", "estimator", "state", "unit", "rms_difference"])
+
+
+def wrap_deg(angle: np.ndarray) -> np.ndarray:
+    """Angles in degrees wrapped to [−180, 180)."""
+    return (angle + 180.0) % 360.0 - 180.0
+
+
+def _difference_markdown(table: pd.DataFrame) -> str:
+    """One block per reference: angle × row, the RMS difference in degrees."""
+    blocks = []
+    for reference, part in table.groupby("reference", sort=False):
+        wide = part.pivot_table(index="state", columns="estimator", values="rms_difference", sort=False)
+        wide.columns.name = None
+        cells = wide.map(lambda v: "diverged" if np.isnan(v) else f"{v:.3f}").reset_index()
+        blocks.append(f"RMS difference to {reference} [deg]\n\n{markdown_table(cells)}\n")
+    return "\n".join(blocks)
+
+
 def caption(data: MonteCarloData) -> str:
     """The line printed above the table."""
     lab = data.labels
@@ -119,6 +169,25 @@ def plot_replay(data: MonteCarloData, angles: dict[str, np.ndarray], reference: 
     axes[0].legend(fontsize=8, ncol=len(angles), loc="upper right")
     axes[-1].set_xlabel("time [s] (shaded: warm-up, not counted)")
     _save(fig, f"{data.labels['log']}: difference to PX4 (ours − PX4)", fig_dir / "difference_to_px4.png")
+
+
+def plot_difference_to_smoothed(
+    data: MonteCarloData, angles: dict[str, np.ndarray], reference: str, path: Path
+) -> None:
+    """Every other row's roll, pitch and yaw minus those of the offline ``reference`` row, PX4's
+    estimate included, the warm-up shaded."""
+    t, warmup = data.time, data.labels["warmup"]
+    others = {name: a for name, a in angles.items() if name != reference}
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    for j, ax in enumerate(axes):
+        for name, a in others.items():
+            style = {"color": "k", "lw": 1.8} if name == PX4 else {"lw": 1.0}
+            ax.plot(t, wrap_deg(a[:, j] - angles[reference][:, j]), label=name, **style)
+        ax.axvspan(t[0], t[0] + warmup, color="0.85", zorder=0)
+        ax.set_ylabel(f"{ANGLES[j]} diff. [deg]")
+    axes[0].legend(fontsize=8, ncol=len(others), loc="upper right")
+    axes[-1].set_xlabel("time [s] (shaded: warm-up, not counted)")
+    _save(fig, f"{data.labels['log']}: difference to the offline reference {reference}", path)
 
 
 def _save(fig: plt.Figure, title: str, path: Path) -> None:
@@ -156,10 +225,18 @@ class ReplayJob(OpenLoopJob):
             arrays[f"{res.name}/estimate"] = res.saved["estimate"]
             arrays[f"{res.name}/std"] = res.saved["std"]
             arrays[f"{res.name}/angles_deg"] = angles[res.name]
+        offline = [res.name for res in offline_references(finished.results)]
+        to_smoothed = difference_to_smoothed({**angles, PX4: ref_angles}, offline, window)
+        if offline:
+            to_smoothed.to_csv(finished.out_dir / "difference_to_smoothed.csv", index=False)
+            (finished.out_dir / "difference_to_smoothed.md").write_text(_difference_markdown(to_smoothed))
         if cfg.output.figures:
             fig_dir = finished.out_dir / "figures"
             fig_dir.mkdir(exist_ok=True)
             plot_replay(data, angles, ref_angles, fig_dir)
+            if offline:
+                plot_difference_to_smoothed(data, {**angles, PX4: ref_angles}, offline[0],
+                                            fig_dir / "difference_to_smoothed.png")  # fmt: skip
         fields = {
             "labels": {**data.labels, "seed": int(cfg.seed), "runs": 1, "duration": float(data.time[-1]),
                        "sample_period": float(cfg.sample_period)},
@@ -170,4 +247,11 @@ class ReplayJob(OpenLoopJob):
             "companion_names": [],
             "measurement_names": list(data.model.measurement_names),
         }  # fmt: skip
-        return Report(tables, fields, arrays, caption(data))
+        if offline:
+            fields["difference_to_smoothed"] = {
+                reference: {name: dict(zip(part["state"], part["rms_difference"], strict=True))
+                            for name, part in by_reference.groupby("estimator", sort=False)}
+                for reference, by_reference in to_smoothed.groupby("reference", sort=False)
+            }  # fmt: skip
+        after = _difference_markdown(to_smoothed) if offline else None
+        return Report(tables, fields, arrays, caption(data), after)
