@@ -29,9 +29,11 @@ def _save(fig: plt.Figure, title: str, path: Path) -> Path:
 
 
 def _grid(count: int) -> tuple[plt.Figure, np.ndarray]:
-    cols = 3
+    """Up to three panels a row; a model with fewer states gets fewer, wider columns."""
+    cols = min(3, count)
     rows = int(np.ceil(count / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 2.6 * rows), sharex=True, squeeze=False)
+    width, height = {1: (9.0, 3.4), 2: (10.0, 2.6)}.get(cols, (4.2 * cols, 2.6))
+    fig, axes = plt.subplots(rows, cols, figsize=(width, height * rows), sharex=True, squeeze=False)
     for ax in axes.flat[count:]:
         ax.set_visible(False)
     return fig, axes.ravel()
@@ -67,7 +69,8 @@ def plot_errors(
     (dashed) ±3 standard deviations of the PCRLB, the floor no estimator's spread can go below."""
     model = data.model
     n = model.n_err
-    fig, axes = plt.subplots(len(results), n, figsize=(2.6 * n, 2.2 * len(results)), sharex=True, squeeze=False)
+    width = max(2.6 * n, 8.0)  # a scalar model's one column is as wide as a page, its title readable
+    fig, axes = plt.subplots(len(results), n, figsize=(width, 2.2 * len(results)), sharex=True, squeeze=False)
     for r, res in enumerate(results):
         err = model.boxminus(res.saved["estimate"][run], data.truth[run])
         sig = 3.0 * res.saved["std"][run]
