@@ -43,6 +43,11 @@ register_schemas()
 
 
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
+def has_smoother(cfg: DictConfig) -> bool:
+    """Whether an estimator of ``cfg`` has a smoother (its smoothed row joins the tables)."""
+    return any(node.get("smoother", "none") != "none" for node in cfg.estimator.values())
+
+
 def _main(cfg: DictConfig) -> float | None:
     """Run one job; with an ``objective`` configured, return it (what a tuning sweeper minimises;
     ``inf`` for a job that failed, so that the sweep goes on)."""
@@ -67,7 +72,7 @@ def _main(cfg: DictConfig) -> float | None:
         f"\n{summary['_caption']}"  # a flight-log replay (docs/replay.md)
         if "_caption" in summary
         else f"\nPer-state RMSE, mean ± std over {cfg.runs} Monte Carlo runs (per-run RMSE over time; diverged runs "
-        f"excluded).\n{pcrlb_caption(cfg.model.name)}"
+        f"excluded).\n{pcrlb_caption(cfg.model.name, smoothed=has_smoother(cfg))}"
     )
     print(summary["_table"].to_string(index=False))
     if "_after_table" in summary:

@@ -51,18 +51,29 @@ def pcrlb_is_bound(model_name: str) -> bool:
     return spec is not None and spec.pcrlb_is_bound
 
 
-def pcrlb_caption(model_name: str) -> str:
-    """The line printed under the RMSE table that says what its PCRLB column is."""
+SMOOTHED_NOTE = (
+    " It is the filtering bound (measurements up to each step): a smoothed row also uses the later ones, so its "
+    "own bound is lower and it may go below this column."
+)
+
+
+def pcrlb_caption(model_name: str, smoothed: bool = False) -> str:
+    """The line printed under the RMSE table that says what its PCRLB column is; with ``smoothed``
+    (the table has smoothed rows), that the column is the filtering bound, not the smoothers' (their
+    Fisher information adds the later measurements', so their bound is lower; Tichavský, Muravchik &
+    Nehorai 1998 give the filtering recursion)."""
     if pcrlb_is_bound(model_name):
-        return (
+        caption = (
             "PCRLB: the posterior Cramér-Rao bound (the truth follows the filter model), a floor on the pooled RMSE "
             "(rmse_summary.csv)."
         )
-    return (
-        f"PCRLB: the posterior Cramér-Rao recursion of the filter model along the true trajectories; on "
-        f"model={model_name} the truth does not follow the filter model, so it is a reference, not a bound "
-        "(filters can go below it)."
-    )
+    else:
+        caption = (
+            f"PCRLB: the posterior Cramér-Rao recursion of the filter model along the true trajectories; on "
+            f"model={model_name} the truth does not follow the filter model, so it is a reference, not a bound "
+            "(filters can go below it)."
+        )
+    return caption + (SMOOTHED_NOTE if smoothed else "")
 
 
 def _inverse_noise(M: np.ndarray) -> np.ndarray:
