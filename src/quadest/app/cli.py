@@ -42,12 +42,12 @@ from quadest.evaluation.pcrlb import pcrlb_caption
 register_schemas()
 
 
-@hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def has_smoother(cfg: DictConfig) -> bool:
     """Whether an estimator of ``cfg`` has a smoother (its smoothed row joins the tables)."""
     return any(node.get("smoother", "none") != "none" for node in cfg.estimator.values())
 
 
+@hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def _main(cfg: DictConfig) -> float | None:
     """Run one job; with an ``objective`` configured, return it (what a tuning sweeper minimises;
     ``inf`` for a job that failed, so that the sweep goes on)."""
