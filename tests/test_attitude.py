@@ -20,6 +20,7 @@ from quadest.estimators.error_state_ekf import ErrorStateEKF
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.registry import build_estimator
+from quadest.estimators.smoothing import rts_backward
 from quadest.estimators.srukf import SRUKF
 from quadest.evaluation.consistency import chi2_band
 from quadest.models.attitude import AttitudeFilterModel
@@ -78,13 +79,17 @@ def _synthetic(model: AttitudeFilterModel, steps: int, rate_amplitude: float, se
     return x, u, acc, mag
 
 
-def _filter(est, x_true, u, acc, mag, x0, P0, mag_every: int = 2):
+def _filter(est, x_true, u, acc, mag, x0, P0, mag_every: int = 2, steps: list | None = None):
     """Means (K, B, 10) and covariances (K, B, 9, 9) after the updates of each step; the
-    magnetometer every ``mag_every`` steps (0: never)."""
+    magnetometer every ``mag_every`` steps (0: never). With a list ``steps``, the filter records
+    its smoother steps there (the K − 1 transitions between the returned estimates)."""
+    est.smoothing = steps is not None
     est.initialize(x0.copy(), P0.copy())
     means, covs = [], []
     for k in range(1, u.shape[1]):
         est.predict(u[:, k - 1])
+        if steps is not None and k > 1:
+            steps.append(est.smoother_step)
         est.update(acc[:, k], u[:, k])
         if mag_every and k % mag_every == 0:
             est.update(mag[:, k], u[:, k], sensor="mag")
@@ -334,6 +339,45 @@ def test_filterpy_ukf_on_the_manifold_equals_the_mekf_on_a_nearly_linear_case():
     x0, P0 = _prior(B, model, x[:, 0], (1e-3, 1e-4, 1e-3), seed=8)
     ref_m, ref_P = _filter(ErrorStateEKF(model), x, u, acc, mag, x0, P0)
     m, P = _filter(PerRunAdapter(model, FilterpyUKF, alpha=1.0), x, u, acc, mag, x0, P0)
+    sigma = np.sqrt(np.diagonal(ref_P, axis1=-2, axis2=-1))
+    assert np.abs(model.boxminus(m, ref_m) / sigma).max() < 1e-2
+    assert np.abs(P - ref_P).max() <= 5e-3 * np.abs(ref_P).max()
+
+
+def _smoothed(est, *args):
+    """The fixed-interval smoothed means and covariances of :func:`_filter`'s run."""
+    steps: list = []
+    means, covs = _filter(est, *args, steps=steps)
+    return rts_backward(list(means), covs[-1], steps, est.smoothing_form())
+
+
+def test_filterpy_ekf_smoother_on_the_manifold_is_the_mekf_smoother_without_reset_jacobian():
+    """The RTS smoother of filterpy's EKF in error coordinates against the MEKF's without the reset
+    Jacobian: the same filter (above), the same smoother steps, the correction injected with ⊞.
+    The backward pass solves with the same predicted covariances, so the round-off argument and
+    tolerance of the filters' test hold."""
+    B = 3
+    model = _model(B, errors=True)
+    x, u, acc, mag = _synthetic(model, 100, 1.0, seed=11)
+    x0, P0 = _prior(B, model, x[:, 0], (0.05, 0.01, 0.1), seed=12)
+    ref_m, ref_P = _smoothed(ErrorStateEKF(model, reset_jacobian=False), x, u, acc, mag, x0, P0)
+    m, P = _smoothed(BatchedFilterpyEKF(model), x, u, acc, mag, x0, P0)
+    sigma = np.sqrt(np.diagonal(ref_P, axis1=-2, axis2=-1))
+    assert np.abs(model.boxminus(m, ref_m) / sigma).max() < 1e-9
+    assert np.abs(P - ref_P).max() <= 1e-9 * np.abs(ref_P).max()
+    filtered_m, _ = _filter(ErrorStateEKF(model, reset_jacobian=False), x, u, acc, mag, x0, P0)
+    assert np.abs(model.boxminus(filtered_m[:-1], ref_m[:-1]) / sigma[:-1]).max() > 1e-3  # it did smooth
+
+
+def test_filterpy_ukf_smoother_on_the_manifold_equals_the_mekf_smoother_on_a_nearly_linear_case():
+    """The unscented smoother of filterpy's UKF in error coordinates (USQUE) against the MEKF's:
+    the second-order argument and tolerances of the filters' test."""
+    B = 3
+    model = _model(B)
+    x, u, acc, mag = _synthetic(model, 100, 1.0, seed=7)
+    x0, P0 = _prior(B, model, x[:, 0], (1e-3, 1e-4, 1e-3), seed=8)
+    ref_m, ref_P = _smoothed(ErrorStateEKF(model, reset_jacobian=False), x, u, acc, mag, x0, P0)
+    m, P = _smoothed(PerRunAdapter(model, FilterpyUKF, alpha=1.0), x, u, acc, mag, x0, P0)
     sigma = np.sqrt(np.diagonal(ref_P, axis1=-2, axis2=-1))
     assert np.abs(model.boxminus(m, ref_m) / sigma).max() < 1e-2
     assert np.abs(P - ref_P).max() <= 5e-3 * np.abs(ref_P).max()

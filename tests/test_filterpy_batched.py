@@ -35,7 +35,7 @@ def test_batched_model_evaluation_gives_the_per_run_numbers(formulation, baselin
         P0[2, 0, 0] = -1.0
     make_per_run, make_batched = BASELINES[baseline]
     per_run, batched = make_per_run(m), make_batched(m)
-    assert batched.capabilities == per_run.capabilities == {"innovation"}
+    assert batched.capabilities == per_run.capabilities == {"innovation", "smoothing"}
     companion = data.companion0
     for est in (per_run, batched):
         est.initialize(x0, P0)

@@ -22,6 +22,8 @@ from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints, UnscentedKalma
 from helpers import simulate, smooth_model
 from quadest.estimators.error_state_ekf import ErrorStateEKF
 from quadest.estimators.extended import HuberEKF
+from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
+from quadest.estimators.filterpy_ukf import BatchedFilterpyUKF
 from quadest.estimators.particle import BootstrapPF
 from quadest.estimators.particle_ekpf import EKPF
 from quadest.estimators.particle_ilopf import ILOPF
@@ -53,6 +55,9 @@ FILTERS = {
     **{f"cov-{name}": (lambda model, r=rule: SigmaPointKalmanFilter(model, r)) for name, rule in RULES.items()},
     **{f"sqrt-{name}": (lambda model, r=rule: SquareRootSigmaPointFilter(model, r)) for name, rule in RULES.items()},
     "sqrt-ut-augmented": lambda model: SquareRootSigmaPointFilter(model, UnscentedRule(1.0, 2.0, 0.0), augmented=True),
+    "filterpy-ekf": BatchedFilterpyEKF,  # the baselines, filterpy's own filters with our smoother steps
+    "filterpy-ukf": lambda model: BatchedFilterpyUKF(model, 0.5, 2.0, 0.0),
+    "filterpy-ukf-1e-3": lambda model: BatchedFilterpyUKF(model, 1e-3, 2.0, 0.0),
 }
 
 
@@ -106,17 +111,23 @@ def test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model(nam
         assert np.allclose(np.triu(smoothed_spreads, 1), 0.0)
 
 
+@pytest.mark.parametrize("baseline", [False, True], ids=["family", "filterpy-ukf"])
 @pytest.mark.parametrize("alpha", [1.0, 0.5])
-def test_the_unscented_smoother_is_filterpys_on_a_nonlinear_model(alpha):
+def test_the_unscented_smoother_is_filterpys_on_a_nonlinear_model(alpha, baseline):
     """The same filtered sequence through both smoothers; filterpy's points are made from the
-    rows of ``Lᵀ`` (``sqrt_method``), which are the columns of our lower factor ``L``."""
+    rows of ``Lᵀ`` (``sqrt_method``), which are the columns of our lower factor ``L``. Both the
+    family's UKF and the filterpy baseline (``ukf``, whose steps come from filterpy's own points)."""
     model = smooth_model(seed=3, n=3, m=2, batch_size=1)
     rng = np.random.default_rng(9)
     K = 30
     u = 0.1 * rng.standard_normal((1, K + 1, model.nu))
     z = rng.standard_normal((1, K + 1, model.m))
     x0, P0 = 0.3 * np.ones((1, 3)), np.diag([0.5, 0.3, 0.2])[None]
-    est = SigmaPointKalmanFilter(model, UnscentedRule(alpha, 2.0, 0.0))
+    est = (
+        BatchedFilterpyUKF(model, alpha, 2.0, 0.0)
+        if baseline
+        else SigmaPointKalmanFilter(model, UnscentedRule(alpha, 2.0, 0.0))
+    )
     means, covs, steps = forward(est, x0, P0, u, z)
     smoothed, smoothed_covs = rts_backward(means, covs[-1], steps, est.smoothing_form())
 

@@ -106,12 +106,17 @@ def test_smoother_keys_are_checked_with_one_line_errors():
         ("srukf", {"smoother": "fixed_lag", "smoother_lag": 0}, "estimator.srukf.smoother_lag"),
         ("pf", {"smoother": "fixed_interval", "smoother_trajectories": 0}, "estimator.pf.smoother_trajectories"),
         ("pf", {"smoother": "fixed_lag"}, "estimator.pf.smoother"),
-        ("ekf", {"smoother": "fixed_interval"}, "estimator.ekf.smoother"),
     ]:
         node = {**cfg.estimator[label], **node_overrides}
         cls, _ = resolve(label, node)
         with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
             smoother_settings(label, node, cls)
+
+    class WithoutSteps:  # a plugin filter that records no smoother steps (as the ahrs anchors)
+        capabilities = frozenset({"innovation"})
+
+    with pytest.raises(ConfigError, match=r"estimator\.plugin\.smoother.*keeps no smoother steps"):
+        smoother_settings("plugin", {"smoother": "fixed_interval"}, WithoutSteps)
     node = {**cfg.estimator["srukf"], "smoother": "fixed_lag", "smoother_lag": 5}
     assert smoother_settings("srukf", node, resolve("srukf", node)[0]) == SmootherSettings("fixed_lag", 5, 100)
     assert smoother_settings("srukf", cfg.estimator["srukf"], resolve("srukf", cfg.estimator["srukf"])[0]) is None

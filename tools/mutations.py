@@ -537,6 +537,27 @@ MUTATIONS = (
         (SMOOTHING_RUNS + "test_the_mekf_smoother_resets_its_covariance_as_the_filter_does[True]",),
     ),
     Mutation(
+        "filterpy UKF smoother with the redrawn points in place of the propagated ones",
+        "src/quadest/estimators/filterpy_ukf.py",
+        "DX, D = (points - x)[None], (self.kf.propagated_points - self.kf.x)[None]",
+        "DX, D = (points - x)[None], (self.kf.sigmas_f - self.kf.x)[None]",
+        (SMOOTHERS + "test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model[filterpy-ukf]",),
+    ),
+    Mutation(
+        "filterpy EKF smoother linearised with the predicted covariance",
+        "src/quadest/estimators/filterpy_ekf.py",
+        "step = linearized_smoother_step(P[None], F[None], self.model.Q, factor, self.mean[None])",
+        "step = linearized_smoother_step(self.kf.P[None], F[None], self.model.Q, factor, self.mean[None])",
+        (SMOOTHERS + "test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model[filterpy-ekf]",),
+    ),
+    Mutation(
+        "per-run adapter: a run's smoother step given to another run",
+        "src/quadest/estimators/base.py",
+        "                step = filt.smoother_step",
+        "                step = self.filters[0].smoother_step",
+        (SMOOTHERS + "test_every_gaussian_smoother_is_filterpys_rts_smoother_on_a_linear_model[filterpy-ekf]",),
+    ),
+    Mutation(
         "replay: difference to the offline reference over the warm-up too",
         "src/quadest/app/replay_job.py",
         "            for j, rms in enumerate(rms_difference(diff, window)):",

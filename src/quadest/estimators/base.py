@@ -47,6 +47,7 @@ import numpy as np
 
 from quadest.errors import ConfigError, FilterDivergence
 from quadest.estimators.params import parameter_problem
+from quadest.estimators.smoothing import SmootherStep, SmoothingForm
 from quadest.models.base import FilterModel
 from quadest.numerics.square_root import warm_up
 
@@ -196,6 +197,10 @@ class SingleRunEstimator(_DeclaredParameters, ABC):
     capabilities: ClassVar[frozenset[str]] = frozenset()
     config_name: ClassVar[str | None] = None
     Params: ClassVar[type | None] = None
+    smoothing: bool = False
+    """With capability ``"smoothing"``: every ``predict`` leaves this run's step in ``smoother_step``
+    (a :class:`~quadest.estimators.smoothing.SmootherStep` without the batch axis) and
+    ``smoothing_form()`` says how the steps combine; :class:`PerRunAdapter` stacks them."""
 
     def __init__(self, model: FilterModel) -> None:
         self.model = model
@@ -283,6 +288,33 @@ class PerRunAdapter(Estimator):
     def capabilities(self) -> frozenset[str]:  # type: ignore[override]
         """The wrapped class's capabilities (the adapter has no factor of its own)."""
         return self._capabilities
+
+    @property
+    def smoothing(self) -> bool:  # type: ignore[override]
+        """Whether every run's filter records its smoother steps (set before ``initialize``)."""
+        return all(filt.smoothing for filt in self.filters)
+
+    @smoothing.setter
+    def smoothing(self, on: bool) -> None:
+        for filt in self.filters:
+            filt.smoothing = on
+
+    @property
+    def smoother_step(self) -> SmootherStep:
+        """The runs' steps of the last predict stacked; a failed run (left out of the smoothed
+        result) gets a zero gain, an identity residual and its last mean."""
+        n, B = self.model.n_err, len(self.filters)
+        gain, residual = np.zeros((B, n, n)), np.broadcast_to(np.eye(n), (B, n, n)).copy()
+        predicted = self._mean.copy()
+        for i, filt in enumerate(self.filters):
+            if not self.failed[i]:
+                step = filt.smoother_step
+                gain[i], residual[i], predicted[i] = step.gain, step.residual, step.predicted_mean
+        return SmootherStep(gain, predicted, residual)
+
+    def smoothing_form(self) -> SmoothingForm:
+        """The wrapped filters' form (the same for every run)."""
+        return self.filters[0].smoothing_form()
 
     def set_generators(self, rngs: list[np.random.Generator]) -> None:
         for filt, rng in zip(self.filters, rngs, strict=True):

@@ -17,6 +17,12 @@ On a model whose state is not a vector (``model=attitude``, ``model=ins``) filte
 the error state about a reference point (:mod:`quadest.estimators.local_coordinates`): ``F`` and
 ``H`` are the model's error-state Jacobians ``F_err``/``H_err``, and each update's correction is
 moved into the reference (the multiplicative EKF, Lefferts, Markley & Shuster 1982).
+
+Smoothing (``smoother: fixed_interval | fixed_lag``, docs/smoothers.md): each run's filter keeps
+the RTS smoother's step of its transition (Rauch, Tung & Striebel 1965) from the ``F`` and the
+covariances filterpy used, by the same function as ``mekf``
+(:func:`~quadest.estimators.smoothing.linearized_smoother_step`); on a manifold state the
+correction is injected with ``⊞`` and, as the filter, without a reset Jacobian.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from quadest.estimators.base import PerRunAdapter, SingleRunEstimator
 from quadest.estimators.local_coordinates import LocalCoordinates
+from quadest.estimators.smoothing import SmootherStep, SmoothingForm, linearized_smoother_step
 from quadest.models.base import FilterModel
 
 
@@ -51,7 +58,7 @@ class _LinearisedEKF(ExtendedKalmanFilter):
 class FilterpyEKF(SingleRunEstimator):
     """filterpy's EKF with nonlinear propagation, on one run of a :class:`FilterModel`."""
 
-    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "smoothing"})
 
     def __init__(self, model: FilterModel) -> None:
         super().__init__(model)
@@ -80,7 +87,18 @@ class FilterpyEKF(SingleRunEstimator):
         else:
             self.local.reset(fx)
             self.kf.predicted = np.zeros((self.model.n_err, 1))
+        P = self.kf.P.copy() if self.smoothing else None
         self.kf.predict()
+        if P is not None:
+            factor = np.linalg.cholesky(self.kf.P)[None]  # a run whose P⁻ is not positive definite fails
+            step = linearized_smoother_step(P[None], F[None], self.model.Q, factor, self.mean[None])
+            self.smoother_step = SmootherStep(step.gain[0], step.predicted_mean[0], step.residual[0])
+
+    def smoothing_form(self) -> SmoothingForm:
+        """Covariance form; on a manifold state the model's ⊞/⊟ (no reset Jacobian, as the filter)."""
+        if self.local is None:
+            return SmoothingForm()
+        return SmoothingForm(boxplus=self.model.boxplus, boxminus=self.model.boxminus)
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
         """Update with the primary measurement or a named sensor (its ``h``, ``R`` and a
@@ -117,7 +135,7 @@ class BatchedFilterpyEKF(PerRunAdapter):
     the whole batch at the runs' current means."""
 
     batched: ClassVar[bool] = True
-    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "smoothing"})
     config_name = "ekf"
     Params = EKFParams
 

@@ -23,6 +23,13 @@ On a model whose state is not a vector (``model=attitude``, ``model=ins``) the U
 error about a reference point (:mod:`quadest.estimators.local_coordinates`; USQUE, Crassidis &
 Markley 2003): its sigma points are errors, the model functions see ``reference ⊞ error``, and
 each update's mean error is moved into the reference.
+
+Smoothing (``smoother: fixed_interval | fixed_lag``, docs/smoothers.md): each run's filter keeps
+the unscented RTS smoother's step (Särkkä 2008) from the sigma points filterpy propagated, by the
+same functions as the sigma-point family (:func:`~quadest.estimators.smoothing.sigma_point_smoother_gain`
+with the UT rule of the same α, β, κ); so it equals filterpy's own ``rts_smoother`` given the same
+filtered sequence. On a manifold state the deviations are the local errors and the correction is
+injected with ``⊞`` (no reset Jacobian, as the filter).
 """
 
 from __future__ import annotations
@@ -35,10 +42,13 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from quadest.estimators.base import PerRunAdapter, SingleRunEstimator
+from quadest.estimators.gaussian_steps import sigma_point_covariance
 from quadest.estimators.local_coordinates import LocalCoordinates
 from quadest.estimators.params import ranged, unscented_constraints
+from quadest.estimators.smoothing import SmootherStep, SmoothingForm, sigma_point_smoother_gain
 from quadest.models.base import FilterModel
 from quadest.numerics import ut_weights
+from quadest.numerics.rules import UnscentedRule
 
 
 @dataclass
@@ -61,15 +71,17 @@ class _PointBatchedUKF(UnscentedKalmanFilter):
         super().__init__(**kwargs)
         self.f_points, self.h_points = f_points, h_points
         self.propagated: np.ndarray | None = None
+        self.propagated_points: np.ndarray | None = None
 
     def compute_process_sigmas(self, dt, fx=None, **fx_args) -> None:
         """``self.sigmas_f``: the sigma points of (x, P) through ``f``, or ``propagated`` if given
         (those same points, evaluated by the caller; used once)."""
         if self.propagated is not None:
             self.sigmas_f, self.propagated = self.propagated, None
-            return
-        sigmas = self.points_fn.sigma_points(self.x, self.P)
-        self.sigmas_f = self.f_points(sigmas[None], fx_args["u"][None, :])[0]
+        else:
+            sigmas = self.points_fn.sigma_points(self.x, self.P)
+            self.sigmas_f = self.f_points(sigmas[None], fx_args["u"][None, :])[0]
+        self.propagated_points = self.sigmas_f  # filterpy redraws sigmas_f from (x⁻, P⁻) after this
 
     def update(self, z, R=None, UT=None, hx=None, h_points=None, h_values=None, **hx_args) -> None:
         """``h_points`` (default the primary measurement's) is the vectorised measurement function;
@@ -84,7 +96,7 @@ class _PointBatchedUKF(UnscentedKalmanFilter):
 class FilterpyUKF(SingleRunEstimator):
     """filterpy's UKF on one run of a :class:`FilterModel`."""
 
-    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "smoothing"})
 
     def __init__(
         self,
@@ -97,6 +109,7 @@ class FilterpyUKF(SingleRunEstimator):
         super().__init__(model)
         n = model.n_err
         ut_weights(n, alpha, beta, kappa)  # the same checks as the SR-UKF: α > 0, n + λ > 0
+        self.rule = UnscentedRule(alpha, beta, kappa)  # filterpy's weights, for the smoother step
         self.local = LocalCoordinates(model) if model.has_manifold_state else None
         self._f_points = model.f if self.local is None else self.local.f
         self._h_points = self._sensor_points(model.h)
@@ -129,21 +142,47 @@ class FilterpyUKF(SingleRunEstimator):
         self.kf.P = np.array(P0, dtype=float)
 
     def predict(self, u: np.ndarray) -> None:
+        before = (self.kf.x.copy(), self.process_points()) if self.smoothing else None
         if self.local is None:
             self.kf.predict(u=u)
-            return
-        self.local.advance(u)
-        self.kf.predict(u=u)
-        self.local.settle()
+        else:
+            self.local.advance(u)
+            self.kf.predict(u=u)
+            self.local.settle()
+        self._record_smoother_step(before)
 
     def process_points(self) -> np.ndarray:
         """The sigma points (2n+1, n) the next time update propagates (filterpy's own rule)."""
         return self.kf.points_fn.sigma_points(self.kf.x, self.kf.P)
 
-    def predict_propagated(self, sigmas_f: np.ndarray, u: np.ndarray) -> None:
-        """Time update of a vector state given :meth:`process_points` through ``f`` (2n+1, n)."""
+    def predict_propagated(self, sigmas_f: np.ndarray, u: np.ndarray, points: np.ndarray | None = None) -> None:
+        """Time update of a vector state given :meth:`process_points` (``points``; with smoothing
+        on they make its step) through ``f`` (2n+1, n)."""
+        before = (self.kf.x.copy(), points) if self.smoothing else None
         self.kf.propagated = sigmas_f
         self.kf.predict(u=u)
+        self._record_smoother_step(before)
+
+    def _record_smoother_step(self, before: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """The step of this predict from the filtered mean and sigma points before it (``before``,
+        in the filter's coordinates) and the same points through ``f`` (about ``x⁻``): ``G`` and the
+        residual, the rule's spread of ``DX − G D⁻`` plus ``G Q Gᵀ``."""
+        if before is None:
+            return
+        if not isinstance(self.kf, _PointBatchedUKF):
+            raise ValueError("smoothing needs the propagated sigma points: use vectorize_points=True")
+        x, points = before
+        n = self.model.n_err
+        DX, D = (points - x)[None], (self.kf.propagated_points - self.kf.x)[None]
+        G, E = sigma_point_smoother_gain(self.rule, DX, D, n, np.linalg.cholesky(self.kf.P)[None])
+        residual = sigma_point_covariance(self.rule, E, n, G @ self.model.Q @ np.swapaxes(G, -1, -2))
+        self.smoother_step = SmootherStep(G[0], self.mean.copy(), residual[0])
+
+    def smoothing_form(self) -> SmoothingForm:
+        """Covariance form; on a manifold state the model's ⊞/⊟ (no reset Jacobian, as the filter)."""
+        if self.local is None:
+            return SmoothingForm()
+        return SmoothingForm(boxplus=self.model.boxplus, boxminus=self.model.boxminus)
 
     def update_evaluated(self, z: np.ndarray, h_values: np.ndarray, u: np.ndarray) -> None:
         """Primary update of a vector state given ``h`` at the prior sigma points ``kf.sigmas_f``."""
@@ -184,7 +223,7 @@ class BatchedFilterpyUKF(PerRunAdapter):
     Manifold states and named sensors take the per-run path."""
 
     batched: ClassVar[bool] = True
-    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation"})
+    capabilities: ClassVar[frozenset[str]] = frozenset({"innovation", "smoothing"})
     config_name = "ukf"
     Params = UKFParams
 
@@ -217,7 +256,7 @@ class BatchedFilterpyUKF(PerRunAdapter):
         points = self._stack(FilterpyUKF.process_points)
         if points is not None:
             fx = self.model.f(points, u)
-            self._each(lambda i, filt: filt.predict_propagated(fx[i], u[i]))
+            self._each(lambda i, filt: filt.predict_propagated(fx[i], u[i], points[i]))
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
         if not self._lockstep or sensor is not None:

@@ -71,8 +71,8 @@ def smoother_settings(label: str, node: Mapping[str, Any], cls: type) -> Smoothe
         raise ConfigError(
             f"estimator.{label}.smoother",
             kind,
-            "none: this estimator keeps no smoother steps (smoothers: mekf, hf, the sigma-point family, "
-            "the particle filters; docs/smoothers.md)",
+            "none: this estimator keeps no smoother steps (smoothers: ekf, ukf, mekf, hf, the sigma-point "
+            "family, the particle filters; docs/smoothers.md)",
         )
     if kind == "fixed_lag" and "smoothing" not in capabilities:
         raise ConfigError(
