@@ -171,3 +171,16 @@ def test_no_page_teaches_a_second_way():
     assert "quadest experiment=NAME` turns into" in alias[0] and "not a second way" in alias[0]
     grown = {page: n for page, n in found.items() if n > RECORDED.get(page, 0) and page != "docs/experiments.md"}
     assert not grown, f"pages that show `quadest -cd experiments -cn NAME`; use `quadest experiment=NAME`: {grown}"
+
+
+def test_the_wheel_ships_the_sweep_files_beside_the_config_tree():
+    """``experiment_files`` looks beside the config tree, so the wheel must place ``experiments/``
+    where it places ``conf/`` (both under ``quadest/``); otherwise a sweep runs only from a clone."""
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    build = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["hatch"]["build"]["targets"]
+    shipped = build["wheel"]["force-include"]
+    assert Path(shipped["experiments"]).parent == Path(shipped["conf"]).parent
+    assert Path(shipped["experiments"]).name == cli.EXPERIMENTS and Path(shipped["conf"]).name == "conf"
+    assert "experiments" in build["sdist"]["include"]

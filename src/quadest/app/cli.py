@@ -211,8 +211,8 @@ EXPERIMENTS = "experiments"  # the sweep files' folder, at the repository root
 def experiment_files() -> dict[str, Path]:
     """The experiments that are primary configs of their own, ``experiments/NAME.yaml`` (the
     sweeps, with their launcher and callbacks), by name: those of ``./experiments`` (the clone the
-    command runs in, as ``-cd experiments`` reads) first, then those beside the config tree (an
-    editable install, from any directory)."""
+    command runs in, as ``-cd experiments`` reads) first, then those beside the config tree (the
+    repository's for an editable install, the wheel's copy otherwise: from any directory)."""
     found: dict[str, Path] = {}
     for folder in (Path.cwd() / EXPERIMENTS, Path(config_dir()).parent / EXPERIMENTS):
         for path in sorted(folder.glob("*.yaml")):
@@ -248,8 +248,7 @@ def one_way(argv: list[str]) -> tuple[list[str], Path | None]:
     if unknown or (plain and not names):
         _fail(
             f"experiment={value}: no experiment {', '.join(unknown) or 'named'}; allowed: "
-            f"{', '.join(sorted({*files, *group}))} (experiments/ is read from the working directory: run from the "
-            "repository root)"
+            f"{', '.join(sorted({*files, *group}))}"
         )
     sweeps = [n for n in names if n in files]
     if not sweeps:
