@@ -30,20 +30,23 @@ from quadest.simulation.aiding import report_plugin_problems as report_sensor_pr
 from quadest.simulation.registry import model_spec, state_dimension
 
 
-def validate_run(cfg: ExperimentConf) -> None:
-    require_positive("runs", cfg.runs, "must be an integer >= 1")
-    if cfg.seed < 0:
-        raise ConfigError("seed", cfg.seed, "must be an integer >= 0")
-    require_positive("sample_period", cfg.sample_period, "must be > 0 seconds")
-    if not cfg.duration >= cfg.sample_period:
+def validate_run(experiment: ExperimentConf) -> None:
+    require_positive("runs", experiment.runs, "must be an integer >= 1")
+    if experiment.seed < 0:
+        raise ConfigError("seed", experiment.seed, "must be an integer >= 0")
+    require_positive("sample_period", experiment.sample_period, "must be > 0 seconds")
+    if not experiment.duration >= experiment.sample_period:
         raise ConfigError(
-            "duration", cfg.duration, f"must be at least one sample period (sample_period={cfg.sample_period})"
+            "duration",
+            experiment.duration,
+            f"must be at least one sample period (sample_period={experiment.sample_period})",
         )
-    require_positive("divergence_bound", cfg.divergence_bound)
-    if cfg.workers < 0:
-        raise ConfigError("workers", cfg.workers, "must be >= 0 (0: one process per estimator, up to the CPU count)")
-    if cfg.output.saved_runs < 0:
-        raise ConfigError("output.saved_runs", cfg.output.saved_runs, "must be >= 0")
+    require_positive("divergence_bound", experiment.divergence_bound)
+    if experiment.workers < 0:
+        allowed = "must be >= 0 (0: one process per estimator, up to the CPU count)"
+        raise ConfigError("workers", experiment.workers, allowed)
+    if experiment.output.saved_runs < 0:
+        raise ConfigError("output.saved_runs", experiment.output.saved_runs, "must be >= 0")
     requested_kernels()  # QUADEST_KERNELS, the backend of the square-root numerics (docs/benchmarks.md)
 
 
@@ -90,18 +93,18 @@ def validate_scenario(settings: DataSettings) -> None:
             require_positive(f"scenario.{key}", getattr(sc, key))
 
 
-def validate_estimators(cfg: ExperimentConf, settings: DataSettings) -> None:
-    if not cfg.estimator:
+def validate_estimators(experiment: ExperimentConf, settings: DataSettings) -> None:
+    if not experiment.estimator:
         raise ConfigError("estimator", "[]", f"select at least one of {sorted(builtin_estimators())}")
-    report_plugin_problems({node.get("kind", label) for label, node in cfg.estimator.items()})
+    report_plugin_problems({node.get("kind", label) for label, node in experiment.estimator.items()})
     n = state_dimension(settings)
-    for label, node in cfg.estimator.items():
+    for label, node in experiment.estimator.items():
         cls, params = resolve(label, node)
         problem = parameter_problem(getattr(cls, "Params", None), params, n)
         if problem is not None:
             key, value, allowed = problem
             raise ConfigError(f"estimator.{label}.{key}", value, allowed)
-        if smoother_settings(label, node, cls) is not None and cfg.loop == "estimate":
+        if smoother_settings(label, node, cls) is not None and experiment.loop == "estimate":
             raise ConfigError(
                 f"estimator.{label}.smoother",
                 node.get("smoother"),
