@@ -85,7 +85,7 @@ from quadest.runner import run_estimator
 register_schemas()
 with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
     cfg = compose(config_name="config", overrides=["runs={runs}"])
-data = build_quadrotor_data(cfg)
+data = build_quadrotor_data(data_settings(cfg))
 run_estimator("srukf", SRUKF(data.model, 0.5), data, 50.0, saved_runs=3)
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """

@@ -7,7 +7,9 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
 from quadest.app.schema import register_schemas
+from quadest.app.settings import data_settings
 from quadest.config.paths import config_dir
+from quadest.config.settings import DataSettings
 from quadest.estimators.base import Estimator
 from quadest.models.base import FilterModel
 from quadest.models.functional import FunctionalModel
@@ -77,3 +79,9 @@ def compose_config(overrides: list[str] | None = None):
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
         return compose(config_name="config", overrides=list(overrides or []))
+
+
+def compose_settings(overrides: list[str] | None = None) -> DataSettings:
+    """The typed data settings of the composed root config: what a data builder takes
+    (:func:`quadest.app.settings.data_settings`)."""
+    return data_settings(compose_config(overrides))

@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from helpers import compose_config
+from quadest.app.settings import data_settings
 from quadest.errors import ConfigError
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.cubature import CKF, SRCKF
@@ -227,7 +228,7 @@ def test_error_state_nees_lies_in_its_chi2_band_on_the_figure_eight():
     = [7.24, 10.95] with probability 0.95. Steps are correlated, so the fraction inside has a wide
     spread: at least 85 % of the steps, and the time-and-run average within the same band."""
     cfg = compose_config(["model=attitude", "runs=20", "duration=10", "scenario=figure8"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     lo, hi = chi2_band(9, np.full(1, 20))
     assert np.allclose([lo[0], hi[0]], chi2.ppf([0.025, 0.975], 180) / 20)
     result = run_estimator("mekf", build_estimator("mekf", {"kind": "mekf"}, data.model), data, 50.0)

@@ -13,6 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers import compose_config
+from quadest.app.settings import data_settings
 from quadest.estimators.registry import build_estimator
 from quadest.evaluation.metrics import convergence_table, convergence_time
 from quadest.models.attitude import attitude_errors_deg
@@ -86,7 +87,7 @@ def test_runner_derived_rmse_equals_the_saved_series():
     divergence on, so its sum stops there), and the per-run RMSE is their time mean's root for the
     runs that did not diverge, NaN for the one that did. Tolerance: round-off of 100-term sums."""
     cfg = compose_config(["model=attitude", "runs=3", "duration=1", "scenario=figure8"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     est = build_estimator("mekf", {"kind": "mekf"}, data.model)
     crashes = (np.array([-1, 40, -1]), {1: "test"})
     res = run_estimator("mekf", est, data, divergence_bound=50.0, saved_runs=3, crashes=crashes)

@@ -21,6 +21,7 @@ import quadest.app.job as job
 import quadest.app.open_loop_job as open_loop_job
 from helpers import compose_config
 from quadest.app.cli import precheck
+from quadest.app.settings import data_key
 from quadest.app.validate import validate
 from quadest.cache import keys
 from quadest.cache.cli import main as cache_main
@@ -142,12 +143,12 @@ NOT_DATA = [
 
 @pytest.mark.parametrize("change", DATA_CHANGES)
 def test_every_setting_of_the_data_changes_the_data_key(tmp_path, change):
-    assert keys.data_key(small_cfg(tmp_path, [change])) != keys.data_key(small_cfg(tmp_path))
+    assert data_key(small_cfg(tmp_path, [change])) != data_key(small_cfg(tmp_path))
 
 
 @pytest.mark.parametrize("change", NOT_DATA)
 def test_settings_that_leave_the_data_alone_keep_the_data_key(tmp_path, change):
-    assert keys.data_key(small_cfg(tmp_path, [change])) == keys.data_key(small_cfg(tmp_path / "elsewhere"))
+    assert data_key(small_cfg(tmp_path, [change])) == data_key(small_cfg(tmp_path / "elsewhere"))
 
 
 def test_a_new_code_version_recomputes_everything(tmp_path, spies, monkeypatch):
@@ -392,8 +393,8 @@ def test_a_replayed_log_is_keyed_by_its_bytes(tmp_path):
     log = tmp_path / "flight.ulg"
     log.write_bytes(b"first flight")
     cfg = compose_config(["experiment=px4_replay", f"source.path={log}"])
-    first = keys.data_key(cfg)
+    first = data_key(cfg)
     log.write_bytes(b"second flight")
-    assert keys.data_key(cfg) != first
+    assert data_key(cfg) != first
     log.write_bytes(b"first flight")
-    assert keys.data_key(cfg) == first
+    assert data_key(cfg) == first

@@ -33,6 +33,7 @@ import quadest.app.estimator_runs as estimator_runs
 import quadest.app.job as job
 from helpers import compose_config
 from quadest.app.estimator_runs import RunSettings
+from quadest.app.settings import data_key
 from quadest.cache import keys
 from quadest.cache.lookup import JobCache
 from quadest.cache.store import CacheStore
@@ -104,7 +105,7 @@ def changed(path: LeafPath, value, cfg, tmp_path: Path):
     if path[-1] == "path" and path[0] == "source":
         copied = tmp_path / "copied.ulg"
         if not copied.exists():
-            shutil.copyfile(log_path(cfg), copied)
+            shutil.copyfile(log_path(cfg.source.path), copied)
         return str(copied)
     if isinstance(value, bool):
         return not value
@@ -149,7 +150,7 @@ def test_every_leaf_of_the_config_changes_the_keys_of_what_it_affects(overrides,
     cfg = compose_config(overrides)
     resolved = OmegaConf.to_container(cfg, resolve=True)
     data0, est0 = all_keys(resolved, tmp_path)
-    assert data0 == keys.data_key(cfg)
+    assert data0 == data_key(cfg)
     assert all(key is not None for key in est0.values()), "every built-in estimator is cached"
     problems = []
     for path, value in leaves(resolved):

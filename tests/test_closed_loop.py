@@ -15,6 +15,7 @@ from scipy.optimize import brentq
 
 from helpers import compose_config
 from quadest.app.job import run_job
+from quadest.app.settings import data_settings
 from quadest.closed_loop.control_metrics import StepEvent, step_events, step_response
 from quadest.closed_loop.feedback import StateSensorFeedback, estimate_to_controller_state
 from quadest.closed_loop.quadrotor import QuadrotorLoop
@@ -64,7 +65,7 @@ def test_the_open_loop_data_are_the_pre_change_ones():
     (whole quanta; a rounding change flips one only within ~1e-12 of a half quantum) and sample 0
     (the seed-drawn start at rest). x0 is the exact start plus L0 w (a Cholesky factor and an
     n-term product: n steps of round-off); the rest is the flown truth."""
-    data = build_quadrotor_data(_cfg("model.formulation=augmented", "sensor.encoder.noise_std=0.5"))
+    data = build_quadrotor_data(data_settings(_cfg("model.formulation=augmented", "sensor.encoder.noise_std=0.5")))
     with np.load(REFERENCE) as ref:
         for key in ("P0", "inputs"):
             assert np.array_equal(getattr(data, key), ref[f"open_data/{key}"]), key
@@ -80,14 +81,14 @@ def test_truth_loop_reproduces_the_open_loop_truth(scenario):
     """Close to the stored pre-change truth (see ROUND_OFF), exact at the seed-drawn start; and
     bit for bit the open loop's truth and data flown today."""
     cfg = _cfg(f"scenario={scenario}", "loop=truth")
-    flight, data = QuadrotorLoop.from_config(cfg).fly_shared("truth")
+    flight, data = QuadrotorLoop.from_settings(data_settings(cfg)).fly_shared("truth")
     with np.load(REFERENCE) as ref:
         assert np.array_equal(flight.truth.state[:, 0], ref[f"{scenario}/state"][:, 0])
         for key in ("state", "specific_force", "command"):
             assert_near(getattr(flight.truth, key), ref[f"{scenario}/{key}"], TRUTH_STEPS, key)
-    _, _, today = fly_scenario(cfg, run_streams(int(cfg.seed), int(cfg.runs)))
+    _, _, today = fly_scenario(data_settings(cfg), run_streams(int(cfg.seed), int(cfg.runs)))
     assert np.array_equal(flight.truth.state, today.state)
-    open_loop = build_quadrotor_data(cfg)  # what the estimators see is the open loop's too
+    open_loop = build_quadrotor_data(data_settings(cfg))  # what the estimators see is the open loop's too
     for key in ("truth", "companion_truth", "inputs", "measurements", "x0", "P0"):
         assert np.array_equal(getattr(data, key), getattr(open_loop, key)), key
     assert not flight.crashed.any()
@@ -138,7 +139,7 @@ def test_every_estimator_sees_the_same_draws_and_one_filter_flies_one_truth():
     # Encoders without quantisation: with 256 lines a round-off difference between two filters
     # flips an encoder count now and then, and the loop amplifies it (docs/closed-loop.md).
     cfg = _cfg("loop=estimate", "duration=2.0", "sensor.encoder.lines=0")
-    loop = QuadrotorLoop.from_config(cfg)
+    loop = QuadrotorLoop.from_settings(data_settings(cfg))
     model = loop.filter_model()
     flown, noise = {}, {}
     for label in ("ekf", "ukf", "srukf"):
@@ -161,9 +162,9 @@ def test_every_estimator_sees_the_same_draws_and_one_filter_flies_one_truth():
 
 def test_the_draws_are_the_open_loops_and_the_state_sensor_has_its_own_stream():
     cfg = _cfg("loop=measured", "sensor.encoder.lines=0", "sensor.encoder.noise_std=0.5")
-    loop = QuadrotorLoop.from_config(cfg)
+    loop = QuadrotorLoop.from_settings(data_settings(cfg))
     flight, _ = loop.fly_shared("truth")
-    data = build_quadrotor_data(cfg)
+    data = build_quadrotor_data(data_settings(cfg))
     clean = np.concatenate(
         [
             loop.draws.accel_errors.apply(flight.truth.specific_force),
@@ -213,7 +214,7 @@ class Diverging(Spy):
 @pytest.mark.parametrize(("nan", "reason"), [(False, "attitude beyond max_tilt"), (True, "non-finite command")])
 def test_a_diverging_estimator_crashes_its_own_vehicle_and_the_others_fly_on(nan, reason):
     cfg = _cfg("loop=estimate", "scenario=attitude_steps")
-    loop = QuadrotorLoop.from_config(cfg)
+    loop = QuadrotorLoop.from_settings(data_settings(cfg))
     model = loop.filter_model()
     bad, bad_flight, _ = loop.fly_estimator("bad", Diverging(_estimator(cfg, "ekf", model), nan), 1e9, 0)
     good, good_flight, _ = loop.fly_estimator("ekf", _estimator(cfg, "ekf", model), 1e9, 0)
@@ -278,7 +279,7 @@ def test_step_events_follow_the_scenario():
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
 def test_a_perfect_estimate_hands_the_controller_the_truth(formulation):
     cfg = _cfg("loop=truth", f"model.formulation={formulation}")
-    flight, data = QuadrotorLoop.from_config(cfg).fly_shared("truth")
+    flight, data = QuadrotorLoop.from_settings(data_settings(cfg)).fly_shared("truth")
     truth = flight.truth.state[:, 60]
     fed = estimate_to_controller_state(data.model, data.truth[:, 60], data.companion_truth[:, 60], truth[:, 12:16])
     np.testing.assert_allclose(fed, truth, rtol=1e-12, atol=1e-12)
@@ -310,8 +311,9 @@ def test_every_loop_flies_every_quadrotor_formulation(tmp_path, formulation, loo
 )
 def test_bad_loop_settings_fail_in_one_line_before_any_work(tmp_path, overrides, key, allowed):
     cfg = _cfg(*overrides)
+    settings = data_settings(cfg)
     with pytest.raises(ConfigError) as err:
-        validate_loop(cfg)
+        validate_loop(settings.loop, settings.model.name, settings.closed_loop)
     assert err.value.key == key and allowed in str(err.value) and "\n" not in str(err.value)
     with pytest.raises(ConfigError):
         run_job(cfg, tmp_path / "out")

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from helpers import compose_config, random_spd
+from helpers import compose_config, compose_settings, random_spd
+from quadest.app.settings import data_settings
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.base import Estimator, PerRunAdapter
@@ -66,7 +67,7 @@ class _Draws(Estimator):
 
 
 def _draws(runs: int, seed: int = 3) -> np.ndarray:
-    data = build_data(compose_config([*LINEAR, f"runs={runs}", f"seed={seed}"]))
+    data = build_data(compose_settings([*LINEAR, f"runs={runs}", f"seed={seed}"]))
     est = _Draws(data.model)
     run_estimator("draws", est, data, 1e9)
     return np.array(est.draws)
@@ -81,7 +82,7 @@ def test_random_estimator_gets_reproducible_per_run_generators_of_its_own_stream
 
 
 def test_adding_a_random_estimator_changes_no_other_estimators_numbers():
-    data = build_data(compose_config([*LINEAR, "runs=3"]))
+    data = build_data(compose_settings([*LINEAR, "runs=3"]))
     alone = run_estimator("srukf", SRUKF(data.model), data, 1e9)
     run_estimator("draws", _Draws(data.model), data, 1e9)
     again = run_estimator("srukf", SRUKF(data.model), data, 1e9)
@@ -89,13 +90,13 @@ def test_adding_a_random_estimator_changes_no_other_estimators_numbers():
 
 
 def test_generators_come_from_the_datas_estimator_seeds():
-    data = build_data(compose_config([*LINEAR, "runs=2", "seed=3"]))
+    data = build_data(compose_settings([*LINEAR, "runs=2", "seed=3"]))
     first = [np.random.default_rng(s).standard_normal() for s in data.estimator_seeds]
     assert np.array_equal(_draws(2)[0], first)
 
 
 def test_per_run_adapter_hands_each_run_its_generator():
-    data = build_data(compose_config([*LINEAR, "runs=2"]))
+    data = build_data(compose_settings([*LINEAR, "runs=2"]))
     seen = []
 
     class Single(FilterpyUKF):
@@ -114,7 +115,7 @@ def test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raisi
     """A run filter that returns a NaN mean or an infinite covariance (no exception) is flagged with
     the adapter's reason and keeps its last finite values; the other runs go on; a filter that
     raises is flagged with its error. One check per batch must give the flags a check per run gave."""
-    data = build_data(compose_config([*LINEAR, "runs=4"]))
+    data = build_data(compose_settings([*LINEAR, "runs=4"]))
     run_numbers = itertools.count()
 
     class Single(FilterpyUKF):
@@ -341,7 +342,7 @@ def test_parameter_ranges_come_from_the_params_dataclass(overrides, key, allowed
 
 def test_metrics_take_parameter_columns_from_every_estimators_params():
     cfg = compose_config([*LINEAR, "runs=2", "estimator=[cdkf,ghkf,srukf]", "estimator.cdkf.h=2.0"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     results = [run_estimator(name, cls(data.model), data, 1e9) for name, cls in (("cdkf", SRCDKF), ("srukf", SRUKF))]
     params = {"cdkf": {"kind": "cdkf", "h": 2.0, "augmented": False}, "srukf": {"kind": "srukf", "alpha": 0.5}}
     table = tidy_metrics(results, data, params, {"seed": 1})
@@ -351,7 +352,7 @@ def test_metrics_take_parameter_columns_from_every_estimators_params():
 
 
 def test_filterpy_ukf_innovation_is_a_factor_like_every_estimators():
-    data = build_data(compose_config([*LINEAR, "runs=2"]))
+    data = build_data(compose_settings([*LINEAR, "runs=2"]))
     adapter = PerRunAdapter(data.model, FilterpyUKF)
     res = run_estimator("ukf", adapter, data, 1e9)
     ours = run_estimator("srukf", SRUKF(data.model), data, 1e9)
@@ -378,7 +379,7 @@ class _Collapsed(_Draws):
 
 
 def test_singular_cloud_covariance_makes_nees_unavailable_not_a_divergence():
-    data = build_data(compose_config([*LINEAR, "runs=3"]))
+    data = build_data(compose_settings([*LINEAR, "runs=3"]))
     gaussian = run_estimator("g", _Collapsed(data.model), data, 1e9)
     assert gaussian.diverged.all()  # a Gaussian filter's singular covariance is a failure
 

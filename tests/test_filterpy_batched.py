@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import compose_config
+from helpers import compose_settings
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF, FilterpyEKF
 from quadest.estimators.filterpy_ukf import BatchedFilterpyUKF, FilterpyUKF
@@ -26,7 +26,7 @@ def test_batched_model_evaluation_gives_the_per_run_numbers(formulation, baselin
     the batch's, so the numbers are bit-identical (exact equality). Run 1 starts from a NaN mean
     and run 2 (UKF) from a P0 with no Cholesky factor: they must fail in both and leave the other
     runs untouched."""
-    data = build_data(compose_config([f"model.formulation={formulation}", "runs=4", "duration=1.0"]))
+    data = build_data(compose_settings([f"model.formulation={formulation}", "runs=4", "duration=1.0"]))
     m = data.model
     x0 = data.x0.copy()
     x0[1] = np.nan

@@ -12,6 +12,7 @@ import pytest
 from scipy.stats import chi2
 
 from helpers import compose_config
+from quadest.app.settings import data_settings
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator
@@ -135,7 +136,7 @@ def test_new_streams_are_appended_and_old_ones_keep_their_draws():
 def _ins_data(*overrides: str):
     cfg = compose_config(["model=ins", "runs=2", "duration=1.0", "seed=3", "estimator=[mekf]", *overrides])
     validate(cfg)
-    return build_data(cfg)
+    return build_data(data_settings(cfg))
 
 
 def test_common_random_numbers_across_sensors_and_estimators():
@@ -308,7 +309,7 @@ def test_nees_on_the_figure_eight_lies_in_its_chi2_band(estimator):
     consistent (runs independent). Each of the 10 checked steps must lie in its two-sided band at
     level 1 − 0.01/10 (Bonferroni: a consistent filter fails with probability ≤ 1 %)."""
     cfg = compose_config(["model=ins", "scenario=figure8", "runs=8", "duration=10", "seed=21", "estimator=[mekf]"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     est = build_estimator(estimator, {}, data.model)
     result = run_estimator(estimator, est, data, 1e6)
     assert not result.diverged.any()

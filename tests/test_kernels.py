@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 import quadest.numerics
-from helpers import random_spd, run_filter, simulate, smooth_model
+from helpers import compose_settings, random_spd, run_filter, simulate, smooth_model
 from quadest.app.validate import validate_run
 from quadest.errors import ConfigError, DowndateError
 from quadest.estimators.srukf import SRUKF
@@ -454,10 +454,9 @@ def test_a_bad_backend_is_a_one_line_config_error(monkeypatch):
 
 @pytest.fixture(scope="module", params=["thesis", "augmented"])
 def quadrotor(request):
-    from helpers import compose_config
     from quadest.simulation.quadrotor_data import build_quadrotor_data
 
-    return build_quadrotor_data(compose_config([f"model.formulation={request.param}", "runs=4", "duration=0.2"]))
+    return build_quadrotor_data(compose_settings([f"model.formulation={request.param}", "runs=4", "duration=0.2"]))
 
 
 def quadrotor_points(data, seed: int = 0):

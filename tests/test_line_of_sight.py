@@ -11,6 +11,7 @@ import pytest
 from scipy.stats import chi2, norm
 
 from helpers import compose_config
+from quadest.app.settings import data_settings
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator
@@ -172,7 +173,7 @@ def test_filters_on_line_of_sight_are_consistent_on_the_figure_eight(estimator):
          "model.aiding=[vision]", "sensor.vision.kind=line_of_sight"]
     )  # fmt: skip
     validate(cfg)
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     result = run_estimator(estimator, build_estimator(estimator, {}, data.model), data, 1e6)
     assert not result.diverged.any()
     N, steps = 8, np.arange(100, 801, 100)

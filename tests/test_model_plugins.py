@@ -13,6 +13,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from plugin_site import PLUGINS, fake_site, fenced_blocks, quadest
+from quadest.app.settings import data_settings
 from quadest.evaluation.pcrlb import pcrlb_caption, pcrlb_is_bound, pcrlb_variances
 from quadest.montecarlo.streams import STREAMS
 from quadest.simulation import registry
@@ -65,7 +66,7 @@ def test_the_data_follow_the_pendulum_equations(registered):
     """An independent recursion θ⁺ = θ + T ω + w_θ, ω⁺ = ω − T (g/l) sin θ + w_ω, z = sin θ + v,
     with the draws of each run's process and measurement streams, gives the builder's data."""
     cfg = pendulum_config(registered["pendulum"], length=0.5, rate_noise=0.02)
-    data = registry.build_data(cfg)
+    data = registry.build_data(data_settings(cfg))
     T, w2, K1 = 0.01, 9.81 / 0.5, 201
     assert data.truth.shape == (3, K1, 2) and data.measurements.shape == (3, K1, 1)
     for i in range(3):
@@ -90,7 +91,7 @@ def test_no_filter_beats_the_pendulum_bound(registered):
 
     cfg = pendulum_config(registered["pendulum"])
     cfg.runs, cfg.duration = 100, 4.0
-    data = registry.build_data(cfg)
+    data = registry.build_data(data_settings(cfg))
     floor = pcrlb_variances(data)[1:].mean(axis=0)
     t = stats.t.ppf(1.0 - 0.01 / 4, 99)
     for name in ("ekf", "srukf"):

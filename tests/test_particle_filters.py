@@ -331,14 +331,12 @@ def test_ilopf_combines_a_copy_particle_with_a_discard_particle_by_eq_8():
 def test_upf_benchmark_data_follow_the_model():
     """The truth starts at x0 and moves by Gamma(3, rate 2) increments (all positive, mean 3/2 and
     variance 3/4 within 5 standard errors), the measurements by N(0, R) noise, the input is t."""
-    from omegaconf import OmegaConf
-
+    from quadest.config.settings import DataSettings
+    from quadest.models.schemas import UPFBenchmarkModelConf
     from quadest.simulation.upf_benchmark_data import build_upf_benchmark_data
 
-    model_cfg = {"name": "upf_benchmark", "Q": 0.75, "R": 1e-5, "gamma_shape": 3.0, "gamma_rate": 2.0}
-    model_cfg |= {"switch_time": 30.0, "x0": 1.0, "P0": 0.75}
-    cfg = OmegaConf.create({"runs": 40, "seed": 1, "duration": 59.0, "sample_period": 1.0, "model": model_cfg})
-    data = build_upf_benchmark_data(cfg)
+    model = UPFBenchmarkModelConf(Q=0.75, R=1e-5, gamma_shape=3.0, gamma_rate=2.0, switch_time=30.0, x0=1.0, P0=0.75)
+    data = build_upf_benchmark_data(DataSettings(runs=40, seed=1, duration=59.0, sample_period=1.0, model=model))
     x, u, z, model = data.truth, data.inputs, data.measurements, data.model
     assert (x[:, 0] == 1.0).all() and (u[:, :, 0] == np.arange(1.0, 61.0)).all()
     v = np.stack([x[:, k] - model.f(x[:, k - 1][:, None], u[:, k - 1])[:, 0] for k in range(1, 60)], axis=1)

@@ -28,6 +28,7 @@ from quadest.app.estimator_runs import RunSettings, resolve_workers, run_estimat
 from quadest.app.job import job_kind, run_job
 from quadest.app.open_loop_job import OpenLoopJob
 from quadest.app.replay_job import ReplayJob
+from quadest.app.settings import job_settings
 from quadest.cache.lookup import JobCache
 from quadest.closed_loop.quadrotor import QuadrotorLoop
 from quadest.evaluation.formatting import strict_json
@@ -59,7 +60,7 @@ def test_every_job_kind_runs_through_the_one_pipeline(kind, tmp_path, monkeypatc
 
         monkeypatch.setattr(pipeline, name, spy)
     cfg = compose_config([*overrides, "workers=1", "progress=false", "output.figures=false"])
-    assert isinstance(job_kind(cfg), expected)
+    assert isinstance(job_kind(job_settings(cfg)), expected)
     summary = run_job(cfg, tmp_path)
     assert {key: len(value) for key, value in calls.items()} == {"runs": 1, "tables": 1, "summary": 1}
     written = json.loads((tmp_path / "summary.json").read_text())
@@ -192,7 +193,7 @@ def test_one_worker_policy():
 def test_every_job_kind_can_send_its_estimators_to_worker_processes(kind):
     """The policy holds for every kind: its work pickles, so ``workers=2`` means two processes."""
     overrides, _ = KINDS[kind]
-    job = job_kind(compose_config([*overrides, "progress=false"]))
+    job = job_kind(job_settings(compose_config([*overrides, "progress=false"])))
     work = job.work(job.make_data())
     assert worker_count(work, 2, 2) == 2 and worker_count(work, 1, 2) == 1 and worker_count(work, 0, 1) == 1
 

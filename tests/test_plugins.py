@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
+from helpers import compose_config, compose_settings, random_spd, run_filter, simulate, smooth_model
 from quadest.app.job import run_job
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.cubature import CKF
@@ -141,7 +141,7 @@ def test_ckf_equals_ukf_with_alpha_one_beta_zero_kappa_zero():
 
 
 def test_ckf_equals_ukf_on_the_quadrotor():
-    data = build_quadrotor_data(compose_config(["runs=2", "duration=1.0", "model.formulation=augmented"]))
+    data = build_quadrotor_data(compose_settings(["runs=2", "duration=1.0", "model.formulation=augmented"]))
     m = data.model
     u = np.stack([m.filter_input(data.inputs[:, k], data.companion_truth[:, k]) for k in range(data.time.size)], 1)
     P0 = np.broadcast_to(data.P0, (2, m.n, m.n))

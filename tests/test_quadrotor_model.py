@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from helpers import compose_config
+from quadest.app.settings import data_settings
 from quadest.models.quadrotor_config import quadrotor_params
 from quadest.montecarlo.streams import run_streams
 from quadest.quadrotor.controller import BacksteppingController, BacksteppingGains
@@ -112,7 +113,7 @@ def test_jacobians_match_finite_differences(formulation, calibrated):
     cfg = compose_config(
         [f"model.formulation={formulation}", f"model.calibrated={calibrated}", "runs=3", "duration=4.0"]
     )
-    data = build_quadrotor_data(cfg)
+    data = build_quadrotor_data(data_settings(cfg))
     m = data.model
     k = 300  # mid-flight
     x = data.truth[:, k] + 0.05 * np.random.default_rng(0).standard_normal(data.truth[:, k].shape)
@@ -127,7 +128,7 @@ def test_filter_model_predicts_the_truth_one_step_ahead():
     """f applied to the true state with the true rotor speeds lands close to the next true
     state: the Euler discretisation error is far below the default process noise."""
     cfg = compose_config(["runs=2", "duration=6.0", "sensor.encoder.lines=0", "model.formulation=augmented"])
-    data = build_quadrotor_data(cfg)
+    data = build_quadrotor_data(data_settings(cfg))
     m = data.model
     worst = 0.0
     for k in range(200, 500):
@@ -251,4 +252,4 @@ def test_controller_tracks_attitude_steps():
 
 def test_params_from_config_match_defaults():
     cfg = compose_config([])
-    assert quadrotor_params(cfg.model) == QuadrotorParams()
+    assert quadrotor_params(data_settings(cfg).model) == QuadrotorParams()

@@ -26,6 +26,7 @@ import pytest
 from pyulog import ULog
 
 from helpers import compose_config
+from quadest.app.settings import data_settings
 from quadest.replay.data import build_replay_data, shipped_log
 from quadest.replay.ulog import RELATIVE_TIMESTAMP_INVALID, flight_log_from, read_flight_log
 
@@ -147,7 +148,7 @@ def test_the_replay_measures_the_accelerometer_at_its_px4_times(shifted_log):
     to 1e-9 m/s²: the only difference allowed is the rounding of the times (below 1e-13 s) times the
     largest slope of the log's accelerometer (below 1e5 m/s³)."""
     cfg = compose_config(["experiment=px4_replay", f"source.path={shifted_log}", "duration=5.0", "progress=false"])
-    data = build_replay_data(cfg)
+    data = build_replay_data(data_settings(cfg))
     topics = raw_topics(ULog(str(shifted_log), TOPICS))
     times = px4_times(topics)
     sc = topics["sensor_combined"]

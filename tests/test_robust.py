@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import statsmodels.api as sm
 
-from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
+from helpers import compose_config, compose_settings, random_spd, run_filter, simulate, smooth_model
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.central_difference import CDKF, SRCDKF
@@ -60,7 +60,7 @@ def test_with_infinite_threshold_a_huber_sigma_point_filter_is_its_parent_bit_fo
 
 
 def test_with_infinite_threshold_hf_is_filterpys_ekf_on_the_thesis_quadrotor():
-    data = build_quadrotor_data(compose_config(["runs=2", "duration=1.0"]))
+    data = build_quadrotor_data(compose_settings(["runs=2", "duration=1.0"]))
     m = data.model
     u = np.stack([m.filter_input(data.inputs[:, k], data.companion_truth[:, k]) for k in range(data.time.size)], 1)
     P0 = np.broadcast_to(data.P0, (2, m.n, m.n))

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2, norm
 
-from helpers import compose_config
+from helpers import compose_settings
 from quadest.estimators.particle import ParticleFilter
 from quadest.estimators.registry import build_estimator, builtin_estimators
 from quadest.simulation.registry import build_data
@@ -43,7 +43,7 @@ def test_every_particle_filter_is_checked():
 
 @pytest.mark.parametrize("name", PARTICLE_FILTERS)
 def test_roughening_jitter_has_the_standard_deviation_of_gordon_salmond_and_smith(name):
-    data = build_data(compose_config(["model=linear", f"runs={RUNS}", "duration=0.1", "progress=false"]))
+    data = build_data(compose_settings(["model=linear", f"runs={RUNS}", "duration=0.1", "progress=false"]))
     model = data.model
     n = model.n
     est = build_estimator(name, {"kind": name, "particles": N, "roughening": K}, model)

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from helpers import compose_config
+from helpers import compose_config, compose_settings
 from quadest.app.job import run_job
 from quadest.estimators.base import Estimator
 from quadest.evaluation.metrics import floor_table, summarize, tidy_metrics
@@ -69,7 +69,7 @@ class Scripted(Estimator):
 
 @pytest.fixture(scope="module")
 def scripted_run():
-    data = build_data(compose_config(["model=linear", "runs=3", f"duration={K}", "sample_period=1"]))
+    data = build_data(compose_settings(["model=linear", "runs=3", f"duration={K}", "sample_period=1"]))
     data = replace(data, truth=np.zeros_like(data.truth))
     return data, run_estimator("scripted", Scripted(data.model, scripted_errors()), data, divergence_bound=BOUND)
 

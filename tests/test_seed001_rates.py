@@ -9,6 +9,7 @@ import pytest
 from scipy import stats
 
 from helpers import compose_config
+from quadest.app.settings import data_settings
 from quadest.estimators.registry import build_estimator
 from quadest.evaluation.pcrlb import pcrlb_is_bound, pcrlb_variances
 from quadest.montecarlo.streams import run_streams
@@ -23,7 +24,7 @@ FILTERS = ["ekf", "pf_100", "ekpf_100", "ilopf_100", "ilopf_uniform_100", "upf_1
 @pytest.fixture(scope="module")
 def seed001():
     cfg = compose_config(["experiment=seed001_rates", f"runs={RUNS}", f"duration={DURATION}"])
-    return cfg, build_data(cfg)
+    return cfg, build_data(data_settings(cfg))
 
 
 def test_truth_is_the_filter_model_driven_by_the_process_streams_draws(seed001):

@@ -14,6 +14,7 @@ from omegaconf import OmegaConf
 
 from helpers import compose_config
 from quadest.app.job import run_job
+from quadest.app.settings import data_settings
 from quadest.app.validate import validate_model
 from quadest.closed_loop.control_metrics import StepEvent, step_response
 from quadest.closed_loop.seed003 import Seed003Loop, closed_loop_for, controller_state
@@ -61,7 +62,7 @@ def _central_jacobian(fun, x, h):
 
 def test_the_ekf_is_the_linear_kalman_filter_with_phi_i_plus_f_ts_and_h_identity():
     cfg = _cfg("loop=open", "runs=2", "duration=1.0", "scenario.steps=[[0.3,0.0,4.0],[0.5,1.0,4.0]]")
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     model, T = data.model, float(cfg.sample_period)
     est = _ekf(cfg, model)
     B, K1 = data.truth.shape[:2]
@@ -87,7 +88,7 @@ def test_the_ekf_is_the_linear_kalman_filter_with_phi_i_plus_f_ts_and_h_identity
 
 def test_the_analytic_jacobian_is_the_derivative_of_the_continuous_dynamics():
     cfg = _cfg("loop=open")
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     model = data.model
     rng = np.random.default_rng(3)
     x = np.array([0.3, -0.2, 0.5, -0.4, 0.2]) + 0.1 * rng.standard_normal((3, 5))
@@ -110,7 +111,7 @@ class _Tracker:
 
 
 def test_the_controller_reads_exactly_the_five_states_from_the_estimate_and_the_rest_from_the_truth():
-    loop = Seed003Loop.from_config(_cfg("loop=estimate"))
+    loop = Seed003Loop.from_settings(data_settings(_cfg("loop=estimate")))
     plant = loop.plant()
     plant.step(np.full((3, 4), loop.controller.params.hover_speed + 5.0), np.ones(3, dtype=bool))
     plant.state[:, 3:6] += 0.3  # a moving vehicle: every slot differs from the estimate's
@@ -120,14 +121,14 @@ def test_the_controller_reads_exactly_the_five_states_from_the_estimate_and_the_
     np.testing.assert_array_equal(fed[:, SLOTS], estimate)
     np.testing.assert_array_equal(fed[:, others], plant.state[:, others])
     measured = loop.shared_feedback("measured").state(plant)
-    z = plant.state[:, SLOTS] + sensor_std(loop.cfg) * plant.draws.state_noise[:, plant.k][:, SLOTS]
+    z = plant.state[:, SLOTS] + sensor_std(loop.settings.closed_loop) * plant.draws.state_noise[:, plant.k][:, SLOTS]
     np.testing.assert_array_equal(measured[:, SLOTS], z)
     np.testing.assert_array_equal(measured[:, others], plant.state[:, others])
 
 
 def test_every_command_in_flight_is_the_controllers_on_the_truth_with_the_estimated_five():
     cfg = _cfg("loop=estimate", "duration=2.0")
-    loop = Seed003Loop.from_config(cfg)
+    loop = Seed003Loop.from_settings(data_settings(cfg))
     result, flight, _ = loop.fly_estimator("ekf", _ekf(cfg, loop.filter_model()), 50.0, 3)
     for k in (0, 1, 57, 199):
         fed = controller_state(flight.truth.state[:, k], result.saved["estimate"][:, k])
@@ -136,15 +137,15 @@ def test_every_command_in_flight_is_the_controllers_on_the_truth_with_the_estima
 
 def test_the_arms_share_their_draws_and_the_ekf_sees_what_the_noisy_controller_read():
     cfg = _cfg("duration=1.0")
-    loop = Seed003Loop.from_config(cfg)
+    loop = Seed003Loop.from_settings(data_settings(cfg))
     streams = run_streams(int(cfg.seed), int(cfg.runs))
     K1 = len(loop.references)
     np.testing.assert_array_equal(loop.draws.state_noise, state_sensor_normals(streams, K1))
     np.testing.assert_array_equal(
-        loop.draws.state_noise, draw_plant(cfg, run_streams(int(cfg.seed), 3), loop.flown).state_noise
+        loop.draws.state_noise, draw_plant(data_settings(cfg), run_streams(int(cfg.seed), 3), loop.flown).state_noise
     )
     out_flight, out_data = loop.fly_shared("measured")
-    std = sensor_std(cfg)
+    std = sensor_std(data_settings(cfg).closed_loop)
     np.testing.assert_array_equal(
         out_data.measurements, measure_states(out_flight.truth.state, loop.draws.state_noise, std)
     )
@@ -153,7 +154,7 @@ def test_the_arms_share_their_draws_and_the_ekf_sees_what_the_noisy_controller_r
     np.testing.assert_array_equal(in_flight.truth.command[:, 0], out_flight.truth.command[:, 0])
     np.testing.assert_array_equal(in_data.x0, out_data.measurements[:, 0])
     _, truth_data = loop.fly_shared("truth")
-    open_data = build_data(_cfg("loop=open", "duration=1.0"))
+    open_data = build_data(data_settings(_cfg("loop=open", "duration=1.0")))
     np.testing.assert_array_equal(truth_data.measurements, open_data.measurements)
     np.testing.assert_array_equal(truth_data.truth, open_data.truth)
 
@@ -204,14 +205,17 @@ def test_the_paired_rows_difference_the_same_runs_of_both_arms():
     ],
 )
 def test_bad_seed003_settings_fail_in_one_line(override, key, allowed):
-    cfg = _cfg("loop=estimate", override)
+    settings = data_settings(_cfg("loop=estimate", override))
     with pytest.raises(ConfigError) as err:
-        validate_model(cfg) if key.startswith("model") else validate_loop(cfg)
+        if key.startswith("model"):
+            validate_model(settings)
+        else:
+            validate_loop(settings.loop, settings.model.name, settings.closed_loop)
     assert err.value.key == key and allowed in str(err.value) and "\n" not in str(err.value)
 
 
 def test_the_job_builds_the_seed003_loop_for_its_model():
-    assert type(closed_loop_for(_cfg("loop=truth"))) is Seed003Loop
+    assert type(closed_loop_for(data_settings(_cfg("loop=truth")))) is Seed003Loop
 
 
 def test_the_report_pairs_the_arms_runs_for_control_and_estimation_metrics(tmp_path):

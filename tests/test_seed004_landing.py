@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import compose_config
+from helpers import compose_config, compose_settings
+from quadest.app.settings import data_settings
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
 from quadest.estimators.cubature import CKF5
@@ -48,7 +49,7 @@ def test_the_flown_approach_starts_60_m_away_and_ends_2_m_above_the_moving_platf
     point, moving with it (the controller tracks the smooth reference to a few mm; 5 cm and
     5 cm/s are the margin of a landing pad, not a tuned number)."""
     cfg = compose_config([EXPERIMENT, "runs=2", "seed=4"])
-    _, flown, truth = fly_scenario(cfg, run_streams(4, 2))
+    _, flown, truth = fly_scenario(data_settings(cfg), run_streams(4, 2))
     platform = flown.platform_position(truth.time)
     position, velocity = truth.state[..., 0:3], truth.state[..., 3:6]
     start_gap = np.linalg.norm((platform[0] - position[:, 0])[:, :2], axis=-1)
@@ -100,7 +101,7 @@ def test_the_truth_camera_and_the_filters_camera_see_the_same_platform():
     place (a sign or frame slip on either side turns the lines of sight by whole degrees)."""
     cfg = compose_config([EXPERIMENT, "runs=2", "duration=1.0", "sensor.vision.los_noise=1e-12"])
     validate(cfg)
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     record, model = data.sensors["vision"], data.model
     assert model.nu == 9 and data.inputs.shape[-1] == 9
     frames = np.flatnonzero(record.available)
@@ -128,7 +129,7 @@ def test_the_experiment_composes_validates_and_carries_the_seed_settings():
     assert set(cfg.estimator) == {"mekf", "hf", "hckf", "hhcf", "ckf", "huber_ckf"}
     assert (cfg.estimator.hckf.kind, cfg.estimator.hhcf.kind) == ("hckf", "hhcf")
     assert "robust" not in cfg.estimator.hckf and not cfg.estimator.mekf.reset_jacobian
-    assert isinstance(scenario(cfg.scenario), PlatformApproach)
+    assert isinstance(scenario(data_settings(cfg).scenario), PlatformApproach)
 
 
 def test_a_bad_approach_time_fails_before_any_work():
@@ -139,7 +140,7 @@ def test_a_bad_approach_time_fails_before_any_work():
 def test_a_tiny_run_finishes_with_every_estimator():
     """Two runs of 0.5 s with every estimator of the experiment: none fails, every RMSE is finite."""
     cfg = compose_config([EXPERIMENT, "runs=2", "duration=0.5"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     for label, node in cfg.estimator.items():
         result = run_estimator(label, build_estimator(label, node, data.model), data, 1e6)
         assert not result.diverged.any(), (label, result.reasons)
@@ -149,7 +150,7 @@ def test_a_tiny_run_finishes_with_every_estimator():
 @pytest.fixture(scope="module")
 def tiny_data():
     """Two runs of 0.5 s of the experiment (line of sight, contaminated noise)."""
-    return build_data(compose_config([EXPERIMENT, "runs=2", "duration=0.5"]))
+    return build_data(compose_settings([EXPERIMENT, "runs=2", "duration=0.5"]))
 
 
 def _run(name: str, data, **params):
@@ -189,7 +190,7 @@ def test_a_camera_update_that_loses_definiteness_flags_only_its_runs():
     Cholesky factor (the fallback once had the primary measurement's 0 × 0 shape, and the
     exception failed every run of the batch)."""
     cfg = compose_config([EXPERIMENT, "runs=3", "duration=0.1"])
-    est = CKF5(build_data(cfg).model)
+    est = CKF5(build_data(data_settings(cfg)).model)
     x0 = np.zeros((3, 16))
     x0[:, 0] = 1.0  # identity attitude quaternion
     est.initialize(x0, np.broadcast_to(np.eye(15), (3, 15, 15)))

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from helpers import compose_config
+from helpers import compose_config, compose_settings
 from plugin_site import PLUGINS, fake_site, fenced_blocks, quadest
 from quadest.app.schema import register_schemas
 from quadest.app.validate import validate
@@ -71,7 +71,9 @@ def test_the_docs_walk_through_the_tested_files():
 
 
 def _ins(aiding: str, *extra: str):
-    return build_data(compose_config(["model=ins", f"model.aiding={aiding}", "runs=3", "duration=3", "seed=9", *extra]))
+    return build_data(
+        compose_settings(["model=ins", f"model.aiding={aiding}", "runs=3", "duration=3", "seed=9", *extra])
+    )
 
 
 def named_generator(seed: int, run: int, name: str) -> np.random.Generator:
@@ -158,9 +160,9 @@ def test_a_velocity_sensor_on_the_quadrotor_informs_the_filter(registered):
     brings the EKF's velocity RMSE well below what the MIMU alone gives (under 0.7 of it), on the same MIMU
     draws; its Jacobian is the analytic one."""
     base = ["model=quadrotor", "runs=4", "duration=4", "seed=3"]
-    alone = build_data(compose_config(base))
+    alone = build_data(compose_settings(base))
     sensor = ["model.aiding=[velocimeter]", "sensor.velocimeter.rate=20", "sensor.velocimeter.noise=0.01"]
-    aided = build_data(compose_config([*base, *sensor]))
+    aided = build_data(compose_settings([*base, *sensor]))
     np.testing.assert_array_equal(alone.measurements, aided.measurements)
     np.testing.assert_array_equal(alone.truth, aided.truth)
     x, u = aided.truth[:, 10], aided.model.filter_input(aided.inputs[:, 10], aided.companion_truth[:, 10])

@@ -18,6 +18,7 @@ from filterpy.kalman import KalmanFilter
 
 from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
 from quadest.app.job import run_job
+from quadest.app.settings import data_settings
 from quadest.estimators.central_difference import CDKF, SRCDKF
 from quadest.estimators.cubature import CKF, CKF5, SRCKF, SRCKF5
 from quadest.estimators.divided_difference import DD1
@@ -251,7 +252,7 @@ def test_linear_command_every_family_filter_matches_the_kalman_filter(tmp_path):
     cfg = compose_config([*overrides, f"estimator=[{','.join(names)}]", "output.saved_runs=0"])
     run_job(cfg, tmp_path)
     table = pd.read_csv(tmp_path / "metrics.csv")
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     model = data.model
     B, K1, n = data.truth.shape
     sq = np.zeros((B, n))

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from helpers import compose_config
+from helpers import compose_config, compose_settings
+from quadest.app.settings import data_settings
 from quadest.errors import ConfigError
 from quadest.estimators.error_state_ekf import ErrorStateEKF
 from quadest.estimators.registry import build_estimator, resolve
@@ -31,7 +32,7 @@ LINEAR = ["model=linear", "sample_period=0.1", "duration=4.0", "progress=false"]
 
 def run(overrides: list[str], label: str, smoother: SmootherSettings, saved_runs: int = 2):
     cfg = compose_config(overrides)
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     node = cfg.estimator[label]
     est = build_estimator(label, node, data.model)
     return data, run_estimator(label, est, data, 1e6, saved_runs, smoother=smoother)
@@ -137,7 +138,7 @@ def test_the_fused_srukf_records_the_smoother_steps_of_the_family_path(monkeypat
 
 def test_a_run_the_filter_lost_is_left_out_of_the_smoothed_result():
     cfg = compose_config([*LINEAR, "runs=3", "estimator=[mekf]"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     est = build_estimator("mekf", cfg.estimator.mekf, data.model)
     crashes = (np.array([-1, 5, -1]), {1: "test crash"})
     result = run_estimator("mekf", est, data, 1e6, 0, crashes=crashes, smoother=SmootherSettings("fixed_interval"))
@@ -152,7 +153,7 @@ def test_the_mekf_smoother_resets_its_covariance_as_the_filter_does(reset):
     """The smoothed correction δ is injected with ⊞ and, when the filter resets its covariance,
     the smoothed covariance is reset the same way, ``J P Jᵀ`` with ``J`` the model's reset Jacobian
     at δ (second order in δ, so the RMSE tests above cannot see it: checked here directly)."""
-    data = build_data(compose_config(["model=attitude", "runs=2", "duration=0.1", "progress=false"]))
+    data = build_data(compose_settings(["model=attitude", "runs=2", "duration=0.1", "progress=false"]))
     model = data.model
     form = ErrorStateEKF(model, reset_jacobian=reset).smoothing_form()
     rng = np.random.default_rng(3)
@@ -204,7 +205,7 @@ def test_the_command_prints_smoothed_rows_beside_the_filtered_ones(tmp_path):
 def test_the_particle_smoothers_draws_are_per_run_and_apart_from_the_filters():
     """Each run's backward draws come from its own child of its estimator seed: two runs never
     share them, and they are not the filter's own stream."""
-    seeds = build_data(compose_config(["model=ungm", "runs=3", "duration=2"])).estimator_seeds
+    seeds = build_data(compose_settings(["model=ungm", "runs=3", "duration=2"])).estimator_seeds
     first = [np.random.default_rng(smoother_seed(s)).random(4) for s in seeds]
     assert not any(np.array_equal(a, b) for i, a in enumerate(first) for b in first[i + 1 :])
     for seed, draws in zip(seeds, first, strict=True):

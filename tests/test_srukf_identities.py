@@ -15,6 +15,7 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
+from quadest.app.settings import data_settings
 from quadest.estimators import srukf as srukf_module
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import FilterpyEKF
@@ -125,7 +126,7 @@ def quadrotor_data(request):
             "scenario=figure8",
         ]
     )
-    return build_quadrotor_data(cfg)
+    return build_quadrotor_data(data_settings(cfg))
 
 
 def quadrotor_io(data):

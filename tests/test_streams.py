@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import compose_config
+from helpers import compose_config, compose_settings
+from quadest.app.settings import data_settings
 from quadest.montecarlo.streams import STREAMS, run_seed_sequences, run_streams
 from quadest.simulation.registry import build_data
 
@@ -49,7 +50,7 @@ def test_linear_truth_and_measurements_come_from_the_process_and_measurement_str
     """An independent recursion x_k = A x_{k-1} + L_Q w_k, z_k = C x_k + L_R v_k with the draws
     of the documented streams reproduces the builder's truth and measurements to round-off."""
     cfg = compose_config(["model=linear", "runs=3", "duration=4", "sample_period=0.5", "seed=11"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     model, (B, K1, n) = data.model, data.truth.shape
     A, C = np.eye(4), np.eye(2, 4)
     A[0, 2] = A[1, 3] = 0.5
@@ -77,7 +78,7 @@ SMALL = {
 @pytest.mark.parametrize("model", sorted(SMALL))
 def test_every_builder_gives_each_run_its_estimator_seed(model):
     def seeds(runs: int, seed: int = 5) -> list[np.random.SeedSequence]:
-        return build_data(compose_config([*SMALL[model], f"runs={runs}", f"seed={seed}"])).estimator_seeds
+        return build_data(compose_settings([*SMALL[model], f"runs={runs}", f"seed={seed}"])).estimator_seeds
 
     two, four = seeds(2), seeds(4)
     assert len(two) == 2 and len(four) == 4

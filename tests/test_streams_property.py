@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from helpers import compose_config
+from quadest.app.settings import data_settings
 from quadest.closed_loop.quadrotor import QuadrotorLoop
 from quadest.montecarlo.streams import STREAMS
 from quadest.simulation.registry import build_data, model_specs
@@ -33,8 +34,8 @@ def build(cfg):
     """The data the estimators get: the open loop's (:func:`build_data`), or, in the closed loop
     flown on the truth or on a noisy state sensor, the measurements of the shared flight."""
     if cfg.loop in ("truth", "measured"):
-        return QuadrotorLoop.from_config(cfg).fly_shared(str(cfg.loop))[1]
-    return build_data(cfg)
+        return QuadrotorLoop.from_settings(data_settings(cfg)).fly_shared(str(cfg.loop))[1]
+    return build_data(data_settings(cfg))
 
 
 ESTIMATOR = STREAMS.index("estimator")

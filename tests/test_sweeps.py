@@ -25,6 +25,7 @@ from quadest.aggregate.report import aggregate
 from quadest.aggregate.sweep import expected_jobs
 from quadest.app.cli import one_way
 from quadest.app.schema import register_schemas
+from quadest.app.settings import data_settings
 from quadest.app.validate import validate
 from quadest.estimators.registry import resolve
 from quadest.models.quadrotor_config import triad_spec
@@ -131,7 +132,7 @@ def _measurements_at(cfg, scale: float):
     """Data of ``cfg`` (one short run) with ``sensor.error_scale`` set to ``scale``."""
     cfg = cfg.copy()
     cfg.sensor.error_scale = scale
-    return build_data(cfg)
+    return build_data(data_settings(cfg))
 
 
 def check_sensor_keys(name: str, cell: dict[str, str], cfg) -> None:
@@ -144,7 +145,7 @@ def check_sensor_keys(name: str, cell: dict[str, str], cfg) -> None:
     assert cfg.sensor.name == grade and float(cfg.sensor.error_scale) == scale
     spec = OmegaConf.load(ROOT / "conf" / "sensor" / f"{grade}.yaml")
     T, duration = float(cfg.sample_period), float(cfg.duration)
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
 
     def var(triad) -> float:
         white, walk = scale * triad.get("white_noise", 0.0), scale * triad.get("bias_random_walk", 0.0)
@@ -167,11 +168,11 @@ def check_contamination_keys(name: str, cell: dict[str, str], cfg) -> None:
     for triad in ("accel", "gyro"):
         law = cfg.sensor[triad].noise_law
         assert (law.kind, float(law.epsilon), float(law.variance_factor)) == ("contaminated", eps, factor)
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     gaussian = cfg.copy()
     for triad in ("accel", "gyro"):
         gaussian.sensor[triad].noise_law.kind = "gaussian"
-    base = build_data(gaussian)
+    base = build_data(data_settings(gaussian))
     np.testing.assert_array_equal(data.model.R, base.model.R)
     T, K1 = float(cfg.sample_period), data.time.size
     streams = run_streams(int(cfg.seed), int(cfg.runs))
@@ -191,7 +192,7 @@ def check_process_noise_key(name: str, cell: dict[str, str], cfg) -> None:
     the truth's increments ``x_k − f(x_{k−1}, Ω_{k−1})`` are √Q times the run's ``process`` stream
     draws (the truth is driven by the swept noise, not only the filters' assumption)."""
     q = float(cell["model.Q"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     np.testing.assert_array_equal(data.model.Q, q * np.eye(3))
     x, u = data.truth, data.inputs
     increments = np.stack(
@@ -217,7 +218,7 @@ def check_huber_threshold_key(name: str, cell: dict[str, str], cfg) -> None:
 
 def _error_offsets(cfg):
     """(B, 15) offsets of the initial estimates from the truth, in the error state, and P0."""
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     return data.model.boxminus(data.x0, data.truth[:, 0]), data.P0
 
 
@@ -245,7 +246,7 @@ def check_vision_noise_key(name: str, cell: dict[str, str], cfg) -> None:
     sigma = float(cell["sensor.vision.los_noise"])
 
     def error(c):
-        data = build_data(c)
+        data = build_data(data_settings(c))
         vision = data.model.sensors["vision"]
         exact = np.stack([vision.h(data.truth[:, k], data.inputs[:, k]) for k in range(data.time.size)], 1)
         return data, data.sensors["vision"].values - exact
@@ -263,7 +264,7 @@ def check_seed_key(name: str, cell: dict[str, str], cfg) -> None:
     :func:`run_seed_sequences` for the swept seed (entropy and spawn key)."""
     seed = int(cell["seed"])
     assert int(cfg.seed) == seed
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     expected = run_seed_sequences(seed, int(cfg.runs))["estimator"]
     got = [(s.entropy, s.spawn_key) for s in data.estimator_seeds]
     assert got == [(s.entropy, s.spawn_key) for s in expected], f"{name} {cell}"

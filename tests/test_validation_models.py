@@ -10,7 +10,8 @@ import pytest
 from filterpy.kalman import KalmanFilter
 from scipy import stats
 
-from helpers import compose_config, run_filter
+from helpers import compose_config, compose_settings, run_filter
+from quadest.app.settings import data_settings
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ekf import FilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
@@ -51,7 +52,7 @@ def test_cli_runs_validation_models(tmp_path, model):
 @pytest.fixture(scope="module")
 def linear_data():
     # T = 0.1 s: cond(Q) ≈ 1e3; the information form loses about cond(Q)·eps (see quadest.evaluation.pcrlb)
-    return build_data(compose_config(["model=linear", "runs=50", "duration=30.0", "sample_period=0.1"]))
+    return build_data(compose_settings(["model=linear", "runs=50", "duration=30.0", "sample_period=0.1"]))
 
 
 def kalman_reference(data):
@@ -164,7 +165,7 @@ def test_no_filter_beats_the_pcrlb(overrides):
     conservative on UNGM.) On the linear model the Kalman filter attains the bound, so the pooled
     MSE of every filter must also not exceed it by more than t·SE."""
     cfg = compose_config([*overrides, "estimator=[ekf,ukf,srukf]"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     assert pcrlb_is_bound(cfg.model.name)
     floor = pcrlb_variances(data)[1:].mean(axis=0)
     linear = cfg.model.name == "linear"
@@ -187,7 +188,7 @@ def test_pcrlb_is_called_a_bound_only_where_it_is_one():
     assert "not a bound" in pcrlb_caption("quadrotor")
     assert "not a bound" not in pcrlb_caption("linear") and "floor" in pcrlb_caption("linear")
     cfg = compose_config(["model=quadrotor", "runs=20", "duration=3.0", "estimator=[srukf]"])
-    data = build_data(cfg)
+    data = build_data(data_settings(cfg))
     floor = pcrlb_variances(data)[1:].mean(axis=0)
     res = run_estimator("srukf", build_estimator("srukf", cfg.estimator.srukf, data.model), data, 1e6)
     pooled, se = pooled_mse_and_error(res)

@@ -101,8 +101,12 @@ MUTATIONS = (
     Mutation(
         "the closed loop bypasses the result cache",
         "src/quadest/app/pipeline.py",
-        "    cache = JobCache.for_job(cfg)\n",
-        '    cache = JobCache.for_job(cfg) if cfg.loop == "open" else JobCache(None, None)\n',
+        "    cache = JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n",
+        "    cache = (\n"
+        "        JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n"
+        '        if exp.loop == "open"\n'
+        "        else JobCache(None, None)\n"
+        "    )\n",
         (PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[truth]",
          PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[estimate]"),
     ),
@@ -114,11 +118,11 @@ MUTATIONS = (
         (PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[truth]",),
     ),
     Mutation(
-        "the closed loop's workers handed the structured config (they fall back to one process)",
-        "src/quadest/app/closed_loop_job.py",
-        "closed_loop_for(OmegaConf.create(OmegaConf.to_container(cfg, resolve=True)))",
-        "closed_loop_for(cfg)",
-        (PIPELINE + "test_every_job_kind_can_send_its_estimators_to_worker_processes[closed_estimate]",),
+        "the raw config handed below the application layer again (a model node left a DictConfig)",
+        "src/quadest/app/settings.py",
+        "values[f.name] = OmegaConf.to_object(value) if isinstance(value, DictConfig | ListConfig) else value",
+        'values[f.name] = OmegaConf.to_object(value) if isinstance(value, DictConfig) and f.name != "model" else value',
+        ("tests/test_typed_settings.py::test_every_job_hands_the_layers_below_typed_settings_only",),
     ),
     Mutation(
         "a worker process that dies fails every estimator still running",
@@ -581,7 +585,7 @@ MUTATIONS = (
     Mutation(
         "a model's own range checks skipped",
         "src/quadest/app/validate.py",
-        "    spec.validate(cfg)",
+        "    spec.validate(settings)",
         "    spec.validate",
         ("tests/test_model_plugins.py::test_bad_settings_are_refused_with_one_line",),
     ),

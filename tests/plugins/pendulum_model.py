@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quadest.config.ranges import require_positive
+from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.models.base import FilterModel
 from quadest.montecarlo.data import sample_count
@@ -48,9 +49,8 @@ class PendulumModel(FilterModel):
     n, m, nu = 2, 1, 0
     state_names, state_units, measurement_names = ("theta", "omega"), ("rad", "rad/s"), ("sin_theta",)
 
-    def __init__(self, cfg, batch_size: int) -> None:
-        m = cfg.model
-        self.dt, self.batch_size = float(cfg.sample_period), batch_size
+    def __init__(self, m: PendulumConf, sample_period: float, batch_size: int) -> None:
+        self.dt, self.batch_size = float(sample_period), batch_size
         self.w2 = float(m.gravity) / float(m.length)
         self.Q = np.diag([float(m.angle_noise) ** 2, float(m.rate_noise) ** 2])
         self.R = np.array([[float(m.measurement_noise) ** 2]])
@@ -74,23 +74,25 @@ class PendulumModel(FilterModel):
         return J
 
 
-def build_pendulum_data(cfg):
-    """``cfg.runs`` runs from ``initial_state``; each filter starts from N(truth, P0)."""
-    runs, K = int(cfg.runs), sample_count(cfg.duration, cfg.sample_period)
-    P0 = np.diag(np.square(np.array(list(cfg.model.initial_std), dtype=float)))
-    x0 = np.broadcast_to(np.array(list(cfg.model.initial_state), dtype=float), (runs, 2))
-    estimates = draw_initial_estimates(x0, P0, run_streams(int(cfg.seed), runs)["initial"])
-    return data_from_filter_model(cfg, PendulumModel(cfg, runs), x0, estimates, P0, np.zeros((runs, K + 1, 0)))
+def build_pendulum_data(settings: DataSettings):
+    """``settings.runs`` runs from ``initial_state``; each filter starts from N(truth, P0).
+    ``settings.model`` is a :class:`PendulumConf`."""
+    m, runs, K = settings.model, int(settings.runs), sample_count(settings.duration, settings.sample_period)
+    P0 = np.diag(np.square(np.array(m.initial_std, dtype=float)))
+    x0 = np.broadcast_to(np.array(m.initial_state, dtype=float), (runs, 2))
+    estimates = draw_initial_estimates(x0, P0, run_streams(int(settings.seed), runs)["initial"])
+    model = PendulumModel(m, settings.sample_period, runs)
+    return data_from_filter_model(settings, model, x0, estimates, P0, np.zeros((runs, K + 1, 0)))
 
 
-def validate_pendulum(cfg) -> None:
+def validate_pendulum(settings: DataSettings) -> None:
     """Range checks: one line naming the key, the value and what is allowed."""
-    m = cfg.model
+    m: PendulumConf = settings.model
     for key in ("length", "gravity", "angle_noise", "rate_noise", "measurement_noise"):
-        require_positive(f"model.{key}", m[key])
-    for key in ("initial_state", "initial_std"):
-        if len(m[key]) != 2:
-            raise ConfigError(f"model.{key}", list(m[key]), "must list 2 values (theta, omega)")
+        require_positive(f"model.{key}", getattr(m, key))
+    for key, values in (("initial_state", m.initial_state), ("initial_std", m.initial_std)):
+        if len(values) != 2:
+            raise ConfigError(f"model.{key}", list(values), "must list 2 values (theta, omega)")
     for i, std in enumerate(m.initial_std):
         require_positive(f"model.initial_std[{i}]", std)
 
@@ -99,7 +101,7 @@ MODEL = ModelSpec(
     "pendulum",
     PendulumConf,
     build_pendulum_data,
-    state_dimension=lambda cfg: 2,
+    state_dimension=lambda settings: 2,
     validate=validate_pendulum,
     pcrlb_is_bound=True,  # the truth is drawn from the filter model with its own Q and R
 )

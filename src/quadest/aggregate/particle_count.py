@@ -163,9 +163,9 @@ def read_sweep(sweep_dir: Path) -> list[Job]:
     sorted by Q (a job is a sub-folder with ``metrics.csv`` and ``config.yaml``)."""
     jobs = []
     for job in sorted(p for p in sweep_dir.iterdir() if (p / "metrics.csv").is_file()):
-        cfg = yaml.safe_load((job / "config.yaml").read_text())
+        record = yaml.safe_load((job / "config.yaml").read_text())
         summary = pd.read_csv(job / "rmse_summary.csv")
-        jobs.append((float(cfg["model"]["Q"]), pd.read_csv(job / "metrics.csv"), summary, int(cfg["seed"])))
+        jobs.append((float(record["model"]["Q"]), pd.read_csv(job / "metrics.csv"), summary, int(record["seed"])))
     return sorted(jobs, key=lambda j: j[0])
 
 

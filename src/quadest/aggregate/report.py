@@ -36,8 +36,8 @@ def sweep_output(sweep_dir: Path) -> str:
     """The output the sweep's own config asks for (:data:`OUTPUT_KEY` in ``multirun.yaml``), else
     ``full``."""
     path = Path(sweep_dir) / "multirun.yaml"
-    cfg = (yaml.safe_load(path.read_text()) or {}) if path.is_file() else {}
-    callback = (((cfg.get("hydra") or {}).get("callbacks") or {}).get("aggregate")) or {}
+    record = (yaml.safe_load(path.read_text()) or {}) if path.is_file() else {}
+    callback = (((record.get("hydra") or {}).get("callbacks") or {}).get("aggregate")) or {}
     return check_output(callback.get("output", "full"))
 
 

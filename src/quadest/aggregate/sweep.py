@@ -44,9 +44,9 @@ def expected_jobs(sweep_dir: Path) -> int | None:
     path = sweep_dir / "multirun.yaml"
     if not path.is_file():
         return None
-    cfg = yaml.safe_load(path.read_text()) or {}
-    params = ((cfg.get("hydra") or {}).get("sweeper") or {}).get("params") or {}
-    overrides = ((cfg.get("hydra") or {}).get("overrides") or {}).get("task") or []
+    record = yaml.safe_load(path.read_text()) or {}
+    params = ((record.get("hydra") or {}).get("sweeper") or {}).get("params") or {}
+    overrides = ((record.get("hydra") or {}).get("overrides") or {}).get("task") or []
     sizes = {str(key): _sweep_size(value) for key, value in params.items()}
     for item in overrides:
         key, _, value = str(item).partition("=")

@@ -29,14 +29,14 @@ from hydra.core.override_parser.types import ValueType
 from hydra.types import RunMode
 from omegaconf import DictConfig, open_dict
 
-from quadest.app.job import run_job
+from quadest.app.job import run_validated
 from quadest.app.schema import register_schemas
 from quadest.app.validate import validate
 from quadest.config.paths import config_dir
 from quadest.errors import ConfigError
 from quadest.estimators.registry import discover
 from quadest.evaluation.formatting import strict_json
-from quadest.evaluation.objective import objective_value, validate_objective
+from quadest.evaluation.objective import objective_value
 from quadest.evaluation.pcrlb import pcrlb_caption
 
 register_schemas()
@@ -56,8 +56,8 @@ def _main(cfg: DictConfig) -> float | None:
     multirun = hc.mode == RunMode.MULTIRUN
     failed = None if cfg.objective.estimator is None else math.inf
     try:
-        validate_objective(cfg)
-        summary = run_job(cfg, out_dir, list(hc.overrides.task))
+        settings = validate(cfg)  # the config, typed once (quadest.app.settings), objective included
+        summary = run_validated(cfg, settings, out_dir, list(hc.overrides.task))
     except ConfigError as exc:
         if not multirun:
             _fail(str(exc))
@@ -98,7 +98,7 @@ def _main(cfg: DictConfig) -> float | None:
     print(f"\nOutputs: {out_dir}")
     if cfg.objective.estimator is None:
         return None
-    value = objective_value(cfg.objective, summary)
+    value = objective_value(settings.experiment.objective, summary)
     print(f"Objective ({cfg.objective.estimator}): {value:.6g}")
     return value
 
@@ -177,7 +177,6 @@ def precheck(argv: list[str], primary: Path | None = None) -> None:
                     with open_dict(cfg):
                         del cfg["hydra"]
                 validate(cfg)
-                validate_objective(cfg)
     except ConfigError as exc:
         _fail(str(exc))
     except Exception as exc:  # Hydra/OmegaConf composition errors

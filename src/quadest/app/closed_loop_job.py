@@ -23,10 +23,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from omegaconf import OmegaConf
 
 from quadest.app.estimator_runs import OnData, RunSettings, picklable
 from quadest.app.pipeline import Finished, Report
+from quadest.app.settings import JobSettings
 from quadest.closed_loop.control_tables import control_entries, control_table, write_control_tables
 from quadest.closed_loop.figures import plot_tracking
 from quadest.closed_loop.loop import FlightRecord
@@ -77,20 +77,20 @@ class OwnFlights:
                        companion_truth=data.companion_truth[:saved])  # fmt: skip
 
     def shippable(self) -> bool:
-        """The loop is built from a plain copy of the config (:class:`ClosedLoopJob`): it pickles."""
+        """The loop is built from the job's typed settings (:class:`ClosedLoopJob`): it pickles."""
         return picklable(self.loop)
 
 
 class ClosedLoopJob:
     """:class:`~quadest.app.pipeline.JobKind` of the closed loop (module docstring)."""
 
-    def __init__(self, cfg) -> None:
-        validate_loop(cfg)
-        self.cfg, self.mode = cfg, str(cfg.loop)
+    def __init__(self, settings: JobSettings) -> None:
+        exp = settings.experiment
+        validate_loop(exp.loop, exp.model.name, exp.closed_loop)
+        self.experiment, self.mode = exp, str(exp.loop)
         self.caches_data = self.mode != "estimate"
-        # a plain copy of the config: the loop goes to worker processes, and the structured
-        # config's schema classes do not pickle
-        self.loop = closed_loop_for(OmegaConf.create(OmegaConf.to_container(cfg, resolve=True)))
+        # the loop goes to worker processes: its typed settings are module-level dataclasses, they pickle
+        self.loop = closed_loop_for(settings.data)
 
     def make_data(self) -> ClosedLoopData:
         if self.mode == "estimate":  # no shared flight: the scaffold of every estimator's results
@@ -104,7 +104,7 @@ class ClosedLoopJob:
         return OnData(data.data, crashes=(data.flight.crash_step, data.flight.crash_reasons))
 
     def report(self, finished: Finished) -> Report:
-        cfg, mode, out_dir = self.cfg, self.mode, finished.out_dir
+        cfg, mode, out_dir = self.experiment, self.mode, finished.out_dir
         data: MonteCarloData = finished.data.data
         runs, saved, results = int(cfg.runs), finished.saved_runs, finished.rows.results
         if finished.data.flight is None:

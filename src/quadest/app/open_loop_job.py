@@ -9,6 +9,7 @@ import numpy as np
 
 from quadest.app.estimator_runs import OnData
 from quadest.app.pipeline import Finished, Report
+from quadest.app.settings import JobSettings
 from quadest.evaluation.job_tables import metric_tables
 from quadest.evaluation.metrics import convergence_table
 from quadest.evaluation.pcrlb import pcrlb_variances
@@ -25,21 +26,22 @@ from quadest.simulation.registry import build_data
 
 
 class OpenLoopJob:
-    """:class:`~quadest.app.pipeline.JobKind` of the open loop."""
+    """:class:`~quadest.app.pipeline.JobKind` of the open loop: the data builder gets the job's
+    :class:`~quadest.config.settings.DataSettings`, the report reads the typed experiment."""
 
     caches_data = True
 
-    def __init__(self, cfg) -> None:
-        self.cfg = cfg
+    def __init__(self, settings: JobSettings) -> None:
+        self.settings, self.experiment = settings, settings.experiment
 
     def make_data(self) -> MonteCarloData:
-        return build_data(self.cfg)
+        return build_data(self.settings.data)
 
     def work(self, data: MonteCarloData) -> OnData:
         return OnData(data)
 
     def report(self, finished: Finished) -> Report:
-        cfg, data, out_dir = self.cfg, finished.data, finished.out_dir
+        cfg, data, out_dir = self.experiment, finished.data, finished.out_dir
         results = finished.rows.results
         bound = finished.derived("pcrlb", lambda: pcrlb_variances(data))
         labels = {"seed": int(cfg.seed), "runs": int(cfg.runs)}
@@ -67,7 +69,7 @@ class OpenLoopJob:
         fig_dir.mkdir(exist_ok=True)
         ran = [r for r in results if r.saved["estimate"].shape[0]]
         plot_truth_vs_estimate(data, ran, fig_dir / "truth_vs_estimate.png")
-        if self.cfg.output.per_estimator_figures:
+        if self.experiment.output.per_estimator_figures:
             for res in ran:
                 plot_truth_vs_estimate(data, [res], fig_dir / f"truth_vs_estimate_{res.name}.png")
         plot_errors(data, ran, fig_dir / "errors_3sigma.png", bound)

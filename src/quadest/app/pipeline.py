@@ -19,10 +19,11 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-from omegaconf import OmegaConf
+from omegaconf import DictConfig, OmegaConf
 
 from quadest.app.estimator_runs import RunSettings, Work, run_estimators
 from quadest.app.provenance import provenance
+from quadest.app.settings import JobSettings, data_key
 from quadest.cache.lookup import JobCache
 from quadest.estimators.registry import estimator_parameters
 from quadest.evaluation.formatting import strict_json
@@ -110,21 +111,26 @@ class JobKind(Protocol):
         ...
 
 
-def run_pipeline(kind: JobKind, cfg, out_dir: Path, overrides: list[str] | None = None) -> dict:
-    """Run one job of ``kind`` with the validated config ``cfg`` and write every output into
-    ``out_dir``. Returns the JSON summary, with the printed table (``_table``), the paired lines
-    (``_paired``) and, where the kind has them, the caption (``_caption``) and the text below the
-    table (``_after_table``) for the CLI."""
+def run_pipeline(
+    kind: JobKind, job: JobSettings, cfg: DictConfig, out_dir: Path, overrides: list[str] | None = None
+) -> dict:
+    """Run one job of ``kind`` with the typed settings ``job`` of the validated config ``cfg`` and
+    write every output into ``out_dir``. ``cfg`` itself is only written (``config.yaml``) and hashed
+    into the data key (:func:`quadest.app.settings.data_key`); everything else reads ``job``.
+    Returns the JSON summary, with the printed table (``_table``), the paired lines (``_paired``)
+    and, where the kind has them, the caption (``_caption``) and the text below the table
+    (``_after_table``) for the CLI."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
-    cache = JobCache.for_job(cfg)
+    exp = job.experiment
+    cache = JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)
     data, data_from_cache = cache.data(kind.make_data) if kind.caches_data else (kind.make_data(), False)
-    nodes = {label: OmegaConf.to_container(node, resolve=True) for label, node in cfg.estimator.items()}
+    nodes = exp.estimator
     params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
-    settings = RunSettings(float(cfg.divergence_bound), min(int(cfg.output.saved_runs), int(cfg.runs)),
-                           bool(cfg.progress))  # fmt: skip
-    results, from_cache = run_estimators(kind.work(data), nodes, cache, settings, int(cfg.workers))
+    settings = RunSettings(float(exp.divergence_bound), min(int(exp.output.saved_runs), int(exp.runs)),
+                           bool(exp.progress))  # fmt: skip
+    results, from_cache = run_estimators(kind.work(data), nodes, cache, settings, int(exp.workers))
     rows = table_rows(results, params, from_cache)
     report = kind.report(Finished(out_dir, data, results, rows, settings.saved_runs, cache.derived))
     write_tables(out_dir, with_cache_column(report.tables, rows.from_cache))
@@ -136,7 +142,7 @@ def run_pipeline(kind: JobKind, cfg, out_dir: Path, overrides: list[str] | None 
         **provenance(),
         "overrides": list(overrides or []),
         **report.fields,
-        "cache": {"enabled": bool(cfg.cache.enabled), "data_from_cache": data_from_cache},
+        "cache": {"enabled": bool(exp.cache.enabled), "data_from_cache": data_from_cache},
         "estimators": estimator_entries(rows.results, report.tables, rows.params, rows.from_cache),
     }
     write_summary(out_dir, summary)

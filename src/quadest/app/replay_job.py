@@ -38,6 +38,7 @@ import pandas as pd
 
 from quadest.app.open_loop_job import OpenLoopJob
 from quadest.app.pipeline import Finished, Report
+from quadest.app.schema import ExperimentConf
 from quadest.evaluation.formatting import markdown_table
 from quadest.evaluation.job_tables import MetricTables
 from quadest.evaluation.metrics import estimator_overview, parameter_columns, summarize
@@ -68,7 +69,7 @@ def rms_difference(diff: np.ndarray, window: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(diff[window] ** 2, axis=0))
 
 
-def _table(results, diffs, window, data: MonteCarloData, params, cfg) -> pd.DataFrame:
+def _table(results, diffs, window, data: MonteCarloData, params, cfg: ExperimentConf) -> pd.DataFrame:
     columns = parameter_columns(params)
     rows = []
     for res in results:
@@ -203,7 +204,7 @@ class ReplayJob(OpenLoopJob):
 
     def report(self, finished: Finished) -> Report:
         """The tables, time series and summary fields of the module docstring; draws the figures."""
-        cfg, data, params = self.cfg, finished.data, finished.rows.params
+        cfg, data, params = self.experiment, finished.data, finished.rows.params
         results = finished.rows.results
         reference = data.truth[0]
         window = data.time >= data.time[0] + data.labels["warmup"]

@@ -18,10 +18,13 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from quadest.cache.location import CacheConf
 from quadest.config.closed_loop import ClosedLoopConf
 from quadest.errors import ConfigError
 from quadest.estimators.registry import builtin_estimators
+from quadest.evaluation.objective import ObjectiveConf
 from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.replay.data import SourceConf
 from quadest.sensors.barometer import BarometerSpec
 from quadest.sensors.gps import GPSSpec
 from quadest.sensors.mimu import TriadSpec
@@ -68,37 +71,6 @@ class OutputConf:
     saved_runs: int = 3
     figures: bool = True
     per_estimator_figures: bool = False
-
-
-@dataclass
-class ObjectiveConf:
-    """What a tuning sweep minimises (:mod:`quadest.evaluation.objective`): the mean log-RMSE of the filter
-    states of ``estimator`` plus ``nees_penalty`` times the fraction of steps with NEES outside its
-    95 % band. With ``estimator`` set, the task returns it (Hydra's Optuna sweeper reads that)."""
-
-    estimator: str | None = None  # None: no objective
-    nees_penalty: float = 1.0
-
-
-@dataclass
-class CacheConf:
-    """The result cache (:mod:`quadest.cache`, docs/cache.md): ``dir`` null means
-    ``$QUADEST_CACHE_DIR``, else ``~/.cache/quadest``."""
-
-    enabled: bool = True
-    dir: str | None = None
-
-
-@dataclass
-class SourceConf:
-    """``source``: a recorded flight log replayed instead of the simulation (docs/replay.md; null:
-    simulate). ``path`` null is the shipped PX4 log; ``start`` skips seconds of the log;
-    differences to the log's reference count from ``warmup`` seconds after the start."""
-
-    name: str = "px4"
-    path: str | None = None
-    start: float = 0.0
-    warmup: float = 5.0
 
 
 @dataclass

@@ -8,13 +8,20 @@ rejects here.
 
 from __future__ import annotations
 
-from quadest.app.schema import check_known_keys
+import dataclasses
+
+from omegaconf import DictConfig
+
+from quadest.app.schema import ExperimentConf, check_known_keys
+from quadest.app.settings import JobSettings, job_settings
 from quadest.cache.location import validate_cache
 from quadest.config.ranges import require_non_negative, require_positive
+from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.estimators.params import parameter_problem
 from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
 from quadest.estimators.smoother_settings import smoother_settings
+from quadest.evaluation.objective import validate_objective
 from quadest.numerics.square_root import requested_kernels
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import validate_replay
@@ -23,46 +30,50 @@ from quadest.simulation.aiding import report_plugin_problems as report_sensor_pr
 from quadest.simulation.registry import model_spec, state_dimension
 
 
-def validate_run(cfg) -> None:
-    require_positive("runs", cfg.runs, "must be an integer >= 1")
-    if cfg.seed < 0:
-        raise ConfigError("seed", cfg.seed, "must be an integer >= 0")
-    require_positive("sample_period", cfg.sample_period, "must be > 0 seconds")
-    if not cfg.duration >= cfg.sample_period:
+def validate_run(experiment: ExperimentConf) -> None:
+    require_positive("runs", experiment.runs, "must be an integer >= 1")
+    if experiment.seed < 0:
+        raise ConfigError("seed", experiment.seed, "must be an integer >= 0")
+    require_positive("sample_period", experiment.sample_period, "must be > 0 seconds")
+    if not experiment.duration >= experiment.sample_period:
         raise ConfigError(
-            "duration", cfg.duration, f"must be at least one sample period (sample_period={cfg.sample_period})"
+            "duration",
+            experiment.duration,
+            f"must be at least one sample period (sample_period={experiment.sample_period})",
         )
-    require_positive("divergence_bound", cfg.divergence_bound)
-    if cfg.workers < 0:
-        raise ConfigError("workers", cfg.workers, "must be >= 0 (0: one process per estimator, up to the CPU count)")
-    if cfg.output.saved_runs < 0:
-        raise ConfigError("output.saved_runs", cfg.output.saved_runs, "must be >= 0")
+    require_positive("divergence_bound", experiment.divergence_bound)
+    if experiment.workers < 0:
+        allowed = "must be >= 0 (0: one process per estimator, up to the CPU count)"
+        raise ConfigError("workers", experiment.workers, allowed)
+    if experiment.output.saved_runs < 0:
+        raise ConfigError("output.saved_runs", experiment.output.saved_runs, "must be >= 0")
     requested_kernels()  # QUADEST_KERNELS, the backend of the square-root numerics (docs/benchmarks.md)
 
 
-def validate_model(cfg) -> None:
-    spec = model_spec(cfg)  # an unknown name or a broken plugin: one line
-    report_sensor_problems(list(cfg.model.get("aiding") or []))
-    spec.validate(cfg)
+def validate_model(settings: DataSettings) -> None:
+    spec = model_spec(settings.model.name)  # an unknown name or a broken plugin: one line
+    report_sensor_problems(list(getattr(settings.model, "aiding", None) or []))
+    spec.validate(settings)
     if spec.uses_quadrotor_groups:
-        validate_sensor(cfg)
-        validate_scenario(cfg)
+        validate_sensor(settings)
+        validate_scenario(settings)
 
 
-def validate_sensor(cfg) -> None:
-    s = cfg.sensor
+def validate_sensor(settings: DataSettings) -> None:
+    s = settings.sensor
     require_positive(
         "sensor.error_scale", s.error_scale, "must be > 0 (it also scales the white noise the filters rely on)"
     )
     for triad in ("accel", "gyro"):
-        for key, value in s[triad].items():
-            if key == "noise_law":
-                check_noise_law(f"sensor.{triad}.noise_law", value)
+        node = getattr(s, triad)
+        for f in dataclasses.fields(node):
+            if f.name == "noise_law":
+                check_noise_law(f"sensor.{triad}.noise_law", node.noise_law)
             else:
-                require_non_negative(f"sensor.{triad}.{key}", value)
+                require_non_negative(f"sensor.{triad}.{f.name}", getattr(node, f.name))
         require_positive(
             f"sensor.{triad}.white_noise",
-            s[triad].white_noise,
+            node.white_noise,
             "must be > 0 (the filters' measurement covariance is built from it)",
         )
     if s.encoder.lines < 0:
@@ -70,30 +81,30 @@ def validate_sensor(cfg) -> None:
     require_non_negative("sensor.encoder.noise_std", s.encoder.noise_std)
 
 
-def validate_scenario(cfg) -> None:
-    sc = cfg.scenario
+def validate_scenario(settings: DataSettings) -> None:
+    sc = settings.scenario
     if sc.name not in SCENARIOS:
         raise ConfigError("scenario.name", sc.name, f"one of {sorted(SCENARIOS)}")
     require_non_negative("scenario.initial_position_std", sc.initial_position_std)
     require_positive("scenario.altitude", sc.altitude)
     require_non_negative("scenario.takeoff_time", sc.takeoff_time)
     for key in ("period", "spin_up_time", "transition_time", "approach_time"):
-        if key in sc:
-            require_positive(f"scenario.{key}", sc[key])
+        if hasattr(sc, key):
+            require_positive(f"scenario.{key}", getattr(sc, key))
 
 
-def validate_estimators(cfg) -> None:
-    if not cfg.estimator:
+def validate_estimators(experiment: ExperimentConf, settings: DataSettings) -> None:
+    if not experiment.estimator:
         raise ConfigError("estimator", "[]", f"select at least one of {sorted(builtin_estimators())}")
-    report_plugin_problems({node.get("kind", label) for label, node in cfg.estimator.items()})
-    n = state_dimension(cfg)
-    for label, node in cfg.estimator.items():
+    report_plugin_problems({node.get("kind", label) for label, node in experiment.estimator.items()})
+    n = state_dimension(settings)
+    for label, node in experiment.estimator.items():
         cls, params = resolve(label, node)
         problem = parameter_problem(getattr(cls, "Params", None), params, n)
         if problem is not None:
             key, value, allowed = problem
             raise ConfigError(f"estimator.{label}.{key}", value, allowed)
-        if smoother_settings(label, node, cls) is not None and cfg.get("loop") == "estimate":
+        if smoother_settings(label, node, cls) is not None and experiment.loop == "estimate":
             raise ConfigError(
                 f"estimator.{label}.smoother",
                 node.get("smoother"),
@@ -101,12 +112,21 @@ def validate_estimators(cfg) -> None:
             )
 
 
-def validate(cfg) -> None:
-    """Check every range constraint of a composed config; raise :class:`ConfigError` on the first."""
+def validate(cfg: DictConfig) -> JobSettings:
+    """Check every range constraint of a composed config; raise :class:`ConfigError` on the first.
+
+    Unknown keys and the model's name are checked on the composed config; then it is converted
+    once into its typed settings (:func:`quadest.app.settings.job_settings`), which every other
+    check reads and which are returned: what the job hands the layers below."""
     check_known_keys(cfg)
-    validate_run(cfg)
-    validate_model(cfg)
-    if cfg.get("source") is not None:
-        validate_replay(cfg)
-    validate_estimators(cfg)
-    validate_cache(cfg)
+    model_spec(cfg.model.name)  # an unknown name or a broken plugin: one line, before the conversion
+    settings = job_settings(cfg)
+    experiment, data = settings.experiment, settings.data
+    validate_run(experiment)
+    validate_model(data)
+    if experiment.source is not None:
+        validate_replay(data, experiment.output.saved_runs)
+    validate_estimators(experiment, data)
+    validate_cache(experiment.cache)
+    validate_objective(experiment.objective, list(experiment.estimator))
+    return settings

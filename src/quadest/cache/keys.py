@@ -30,8 +30,6 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-from omegaconf import OmegaConf
-
 import quadest
 from quadest.numerics.square_root import kernel_backend
 from quadest.replay.data import log_path
@@ -155,7 +153,7 @@ def data_material(resolved: dict[str, Any]) -> dict[str, Any]:
     misses."""
     material = without_paths(copy.deepcopy(resolved), NOT_DATA_KEYS)
     if resolved.get("source") is not None:
-        path = log_path(OmegaConf.create({"source": resolved["source"]}))
+        path = log_path(resolved["source"].get("path"))
         material["source_log"] = source_digest([path], path.parent)
     return material
 
@@ -177,11 +175,6 @@ def resolved_data_key(resolved: dict[str, Any]) -> str:
             "config": data_material(resolved),
         }
     )
-
-
-def data_key(cfg) -> str:
-    """Key of the Monte Carlo data of job config ``cfg``."""
-    return resolved_data_key(OmegaConf.to_container(cfg, resolve=True))
 
 
 def estimator_key(

@@ -8,11 +8,21 @@ off: the job then neither reads nor creates anything there.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 from quadest.errors import ConfigError
 
 ENV_VAR = "QUADEST_CACHE_DIR"
+
+
+@dataclass
+class CacheConf:
+    """The ``cache`` node (docs/cache.md): ``dir`` null means ``$QUADEST_CACHE_DIR``, else
+    ``~/.cache/quadest``. The cache is handed this node only (:mod:`quadest.app.settings`)."""
+
+    enabled: bool = True
+    dir: str | None = None
 
 
 def default_cache_dir() -> Path:
@@ -23,24 +33,24 @@ def default_cache_dir() -> Path:
     return Path(base).expanduser() / "quadest"
 
 
-def _setting(cfg) -> tuple[str, str | Path]:
+def _setting(cache: CacheConf) -> tuple[str, str | Path]:
     """The key that sets the folder and its value."""
-    if cfg.cache.dir is not None:
-        return "cache.dir", cfg.cache.dir
+    if cache.dir is not None:
+        return "cache.dir", cache.dir
     return (ENV_VAR, os.environ[ENV_VAR]) if os.environ.get(ENV_VAR) else ("cache.dir", default_cache_dir())
 
 
-def cache_dir(cfg) -> Path:
-    """The absolute cache folder of job config ``cfg``."""
-    return Path(_setting(cfg)[1]).expanduser().absolute()
+def cache_dir(cache: CacheConf) -> Path:
+    """The absolute cache folder of the ``cache`` settings."""
+    return Path(_setting(cache)[1]).expanduser().absolute()
 
 
-def validate_cache(cfg) -> None:
+def validate_cache(cache: CacheConf) -> None:
     """With the cache enabled, its folder must be a non-empty path that is not an existing file;
     raise a one-line :class:`ConfigError` naming ``cache.dir`` (or the environment variable)."""
-    if not cfg.cache.enabled:
+    if not cache.enabled:
         return
-    key, value = _setting(cfg)
+    key, value = _setting(cache)
     allowed = f"a directory path (null: ${ENV_VAR}, else ~/.cache/quadest), or cache.enabled=false"
     if not str(value).strip():
         raise ConfigError(key, value, allowed)

@@ -6,8 +6,8 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any, TypeVar
 
-from quadest.cache.keys import data_key, digest_text, estimator_key
-from quadest.cache.location import cache_dir
+from quadest.cache.keys import digest_text, estimator_key
+from quadest.cache.location import CacheConf, cache_dir
 from quadest.cache.store import CacheStore
 from quadest.montecarlo.results import EstimatorResult
 
@@ -23,11 +23,15 @@ class JobCache:
         self.data_key = data_key
 
     @classmethod
-    def for_job(cls, cfg) -> JobCache:
-        """The cache of job config ``cfg`` (validated), following ``cache.enabled`` and ``cache.dir``."""
-        if not cfg.cache.enabled:
+    def for_job(cls, cache: CacheConf, data_key: str | None) -> JobCache:
+        """The cache of a job with the (validated) ``cache`` settings, following ``enabled`` and
+        ``dir``; ``data_key`` is the key of the job's data (the application layer computes it from
+        the resolved config, :func:`quadest.app.settings.data_key`; ``None`` when disabled)."""
+        if not cache.enabled:
             return cls(None, None)
-        return cls(CacheStore(cache_dir(cfg)), data_key(cfg))
+        if data_key is None:
+            raise ValueError("an enabled cache needs the job's data key")
+        return cls(CacheStore(cache_dir(cache)), data_key)
 
     def data(self, build: Callable[[], T]) -> tuple[T, bool]:
         """The job's data from the cache, or made by ``build`` and stored; and whether it was a hit.

@@ -18,7 +18,7 @@ import numpy as np
 from quadest.closed_loop.control_metrics import StepEvent, control_metrics, step_events
 from quadest.closed_loop.feedback import EstimateFeedback, StateSensorFeedback, TruthFeedback
 from quadest.closed_loop.loop import CrashLimits, Flight, FlightRecord, fly
-from quadest.config.closed_loop import closed_loop_settings
+from quadest.config.settings import DataSettings
 from quadest.estimators.base import Estimator
 from quadest.models.quadrotor import QuadrotorFilterModel
 from quadest.models.quadrotor_config import controller_gains, quadrotor_params, scenario
@@ -41,9 +41,11 @@ from quadest.simulation.quadrotor_data import (
 
 @dataclass
 class QuadrotorLoop:
-    """Everything a closed-loop job of ``model=quadrotor`` flies with, built once from the config."""
+    """Everything a closed-loop job of ``model=quadrotor`` flies with, built once from the job's
+    typed :class:`~quadest.config.settings.DataSettings` (the loop flies the model, sensors,
+    scenario and closed-loop settings of the data, and records what the data builders record)."""
 
-    cfg: object
+    settings: DataSettings
     flown: Scenario
     draws: PlantDraws
     controller: BacksteppingController
@@ -56,30 +58,30 @@ class QuadrotorLoop:
     transient_window: float | None
 
     @classmethod
-    def from_config(cls, cfg) -> QuadrotorLoop:
-        T = float(cfg.sample_period)
-        settings = closed_loop_settings(cfg.closed_loop)
-        flown = scenario(cfg.scenario)
-        time = np.arange(sample_count(float(cfg.duration), T) + 1) * T
-        streams = run_streams(int(cfg.seed), int(cfg.runs))
-        params = quadrotor_params(cfg.model)
+    def from_settings(cls, settings: DataSettings) -> QuadrotorLoop:
+        loop = settings.closed_loop
+        T = float(settings.sample_period)
+        flown = scenario(settings.scenario)
+        time = np.arange(sample_count(float(settings.duration), T) + 1) * T
+        streams = run_streams(int(settings.seed), int(settings.runs))
+        params = quadrotor_params(settings.model)
         return cls(
-            cfg=cfg,
+            settings=settings,
             flown=flown,
-            draws=draw_plant(cfg, streams, flown),
-            controller=BacksteppingController(params, controller_gains(cfg.model.controller)),
+            draws=draw_plant(settings, streams, flown),
+            controller=BacksteppingController(params, controller_gains(settings.model.controller)),
             references=[flown.reference(t) for t in time],
-            limits=CrashLimits(settings.max_tilt, settings.ground_depth),
-            state_std=settings.state_sensor.std(),
-            events=step_events(flown.steps, float(cfg.duration)) if isinstance(flown, AttitudeSteps) else [],
-            band=settings.settling_band,
-            steady_window=settings.steady_window,
-            transient_window=settings.transient_window,
+            limits=CrashLimits(loop.max_tilt, loop.ground_depth),
+            state_std=loop.state_sensor.std(),
+            events=step_events(flown.steps, float(settings.duration)) if isinstance(flown, AttitudeSteps) else [],
+            band=loop.settling_band,
+            steady_window=loop.steady_window,
+            transient_window=loop.transient_window,
         )
 
     def plant(self) -> QuadrotorPlant:
         """A fresh batch of plants at sample 0, from the runs' draws."""
-        c = self.cfg
+        c = self.settings
         return QuadrotorPlant(
             self.controller.params, self.draws, float(c.sample_period), int(c.model.truth_substeps),
             int(c.sensor.encoder.lines),
@@ -125,27 +127,27 @@ class QuadrotorLoop:
 
     def record(self, flight: Flight) -> MonteCarloData:
         """What the filters see of a shared flight: the open loop's measurements of its truth."""
-        return record_quadrotor_data(self.cfg, self._streams(), self.flown, flight.truth)
+        return record_quadrotor_data(self.settings, self._streams(), self.flown, flight.truth)
 
     def filter_model(self) -> QuadrotorFilterModel:
         """The filter model of the job, bound to the runs' assumed sensor errors."""
-        return quadrotor_filter_model(self.cfg, self.draws.accel_errors, self.draws.gyro_errors)
+        return quadrotor_filter_model(self.settings, self.draws.accel_errors, self.draws.gyro_errors)
 
     def _flight_data(self, model: QuadrotorFilterModel, states: np.ndarray) -> MonteCarloData:
         """The data of one estimator's flight of 16-states ``states`` (B, K+1, 16): truth and
         companion truth; the inputs and measurements were consumed in the loop and are not kept."""
-        cfg = self.cfg
+        s = self.settings
         B, K1 = states.shape[:2]
-        x0, P0 = initial_condition(cfg, model.state_names, model.truth_to_state(states[:, 0]), self._streams())
+        x0, P0 = initial_condition(s, model.state_names, model.truth_to_state(states[:, 0]), self._streams())
         return MonteCarloData(
-            model=model, time=np.arange(K1) * float(cfg.sample_period), truth=model.truth_to_state(states),
+            model=model, time=np.arange(K1) * float(s.sample_period), truth=model.truth_to_state(states),
             companion_truth=model.truth_to_companion(states), inputs=np.empty((B, K1, 0)),
             measurements=np.empty((B, K1, 0)), x0=x0, P0=P0, companion0=model.truth_to_companion(states[:, 0]),
-            estimator_seeds=run_seed_sequences(int(cfg.seed), B)["estimator"], labels=data_labels(cfg, self.flown),
+            estimator_seeds=run_seed_sequences(int(s.seed), B)["estimator"], labels=data_labels(s, self.flown),
         )  # fmt: skip
 
     def _streams(self) -> dict:
-        return run_streams(int(self.cfg.seed), int(self.cfg.runs))
+        return run_streams(int(self.settings.seed), int(self.settings.runs))
 
     def empty_data(self, model: QuadrotorFilterModel) -> MonteCarloData:
         """The data of an estimator that could not fly: its truth after sample 0 is NaN."""

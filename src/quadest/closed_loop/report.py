@@ -55,9 +55,9 @@ def control_report(sweep_dir: Path) -> Path:
     ]
     (out / "control_table.md").write_text("\n".join(lines))
 
-    cfg = yaml.safe_load((jobs[0] / "config.yaml").read_text())
-    steps = cfg["scenario"].get("steps", [])
-    events = step_events(steps, float(cfg["duration"]))
+    record = yaml.safe_load((jobs[0] / "config.yaml").read_text())
+    steps = record["scenario"].get("steps", [])
+    events = step_events(steps, float(record["duration"]))
     responses, time, reference = {}, None, None
     for job in jobs:
         series = job / "timeseries.npz"

@@ -21,6 +21,7 @@ import numpy as np
 
 from quadest.closed_loop.feedback import TruthFeedback
 from quadest.closed_loop.quadrotor import QuadrotorLoop
+from quadest.config.settings import DataSettings
 from quadest.models.seed003_attitude import SLOTS, AttitudeRateModel, measure_states, seed003_filter_model, sensor_std
 from quadest.montecarlo import MonteCarloData
 from quadest.quadrotor.plant import QuadrotorPlant
@@ -78,22 +79,23 @@ class Seed003Loop(QuadrotorLoop):
     references and crash limits, with seed 003's feedback and its 5-state filter."""
 
     def shared_feedback(self, loop: str) -> TruthFeedback | MeasuredStatesFeedback:
-        return TruthFeedback() if loop == "truth" else MeasuredStatesFeedback(sensor_std(self.cfg))
+        return TruthFeedback() if loop == "truth" else MeasuredStatesFeedback(sensor_std(self.settings.closed_loop))
 
     def estimate_feedback(self, tracker: EstimatorTracker, plant: QuadrotorPlant) -> EstimatedStatesFeedback:
-        return EstimatedStatesFeedback(tracker, plant, sensor_std(self.cfg))
+        return EstimatedStatesFeedback(tracker, plant, sensor_std(self.settings.closed_loop))
 
     def record(self, flight) -> MonteCarloData:
         return self._flight_data(self.filter_model(), flight.truth.state)
 
     def filter_model(self) -> AttitudeRateModel:
-        return seed003_filter_model(self.cfg, int(self.cfg.runs))
+        s = self.settings
+        return seed003_filter_model(s.model, s.sample_period, int(s.runs))
 
     def _flight_data(self, model: AttitudeRateModel, states: np.ndarray) -> MonteCarloData:
         normals = self.draws.state_noise[:, : states.shape[1]]
-        return seed003_data(self.cfg, states, normals, seed003_labels(self.cfg, self.flown.name))
+        return seed003_data(self.settings, states, normals, seed003_labels(self.settings, self.flown.name))
 
 
-def closed_loop_for(cfg) -> QuadrotorLoop:
-    """The closed loop of ``cfg.model``."""
-    return (Seed003Loop if cfg.model.name == "seed003_attitude" else QuadrotorLoop).from_config(cfg)
+def closed_loop_for(settings: DataSettings) -> QuadrotorLoop:
+    """The closed loop of ``settings.model``."""
+    return (Seed003Loop if settings.model.name == "seed003_attitude" else QuadrotorLoop).from_settings(settings)

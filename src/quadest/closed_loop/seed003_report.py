@@ -20,12 +20,12 @@ import numpy as np
 import pandas as pd
 import yaml
 from hydra.experimental.callback import Callback
-from omegaconf import OmegaConf
 
 from quadest.closed_loop.control_metrics import mean_ci, step_events
 from quadest.closed_loop.figures import plot_tracking
 from quadest.closed_loop.report import format_cell
 from quadest.evaluation.formatting import markdown_table
+from quadest.models.schemas import Seed003AttitudeModelConf
 from quadest.models.seed003_attitude import AttitudeRateModel, one_step_error_variance, seed003_filter_model
 
 ARMS = {"estimate": "ekf_in", "measured": "ekf_out", "truth": "truth"}
@@ -104,13 +104,14 @@ def seed003_report(sweep_dir: Path) -> Path:
     table = pd.concat([pd.read_csv(job / "control_metrics.csv") for job in jobs], ignore_index=True)
     rows = paired_rows(pd.concat([table, *(_estimation_rows(job) for job in jobs)], ignore_index=True))
     rows.to_csv(out / "seed003_table.csv", index=False)
-    cfg = OmegaConf.create(yaml.safe_load((jobs[0] / "config.yaml").read_text()))
+    record = yaml.safe_load((jobs[0] / "config.yaml").read_text())  # the config a job wrote, a plain dict
+    window = record["closed_loop"]["transient_window"]
     crashes = table.drop_duplicates(["loop", "run"]).groupby("loop")["crashed"].sum()
     lines = [
         "# Seed 003 on the quadrotor: EKF in vs EKF out (mean [95 % CI] over the runs; in_minus_out: paired)",
         "",
-        f"{int(cfg.runs)} runs per arm, the same draws in every arm; truth: the controller reads the true state. "
-        f"Overshoot: peak within {cfg.closed_loop.transient_window} s of the step; peak error: max |error| after "
+        f"{int(record['runs'])} runs per arm, the same draws in every arm; truth: the controller reads the true state. "
+        f"Overshoot: peak within {window} s of the step; peak error: max |error| after "
         "that window; steady-state error: mean over the last second before the next step; all in % of the step.",
         "",
         markdown(rows),
@@ -119,13 +120,15 @@ def seed003_report(sweep_dir: Path) -> Path:
         "",
     ]
     (out / "seed003_table.md").write_text("\n".join(lines))
-    _figures(jobs, cfg, out)
+    _figures(jobs, record, out)
     return out / "seed003_table.csv"
 
 
-def _figures(jobs: list[Path], cfg, out: Path) -> None:
-    """``tracking.png`` and ``model_error.csv`` from run 0 of every arm that saved it."""
-    model: AttitudeRateModel = seed003_filter_model(cfg, 1)
+def _figures(jobs: list[Path], record: dict, out: Path) -> None:
+    """``tracking.png`` and ``model_error.csv`` from run 0 of every arm that saved it; ``record`` is
+    the first job's ``config.yaml``."""
+    model_settings = Seed003AttitudeModelConf(**record["model"])  # the filter model reads its top-level keys only
+    model: AttitudeRateModel = seed003_filter_model(model_settings, float(record["sample_period"]), 1)
     responses, errors, time, reference = {}, [], None, None
     for job in jobs:
         series = job / "timeseries.npz"
@@ -139,7 +142,7 @@ def _figures(jobs: list[Path], cfg, out: Path) -> None:
         errors.append({"arm": ARMS[loop], **dict(zip(model.state_names, one_step_error_variance(model, truth[:1]),
                                                      strict=True))})  # fmt: skip
     if responses:
-        events = step_events(OmegaConf.to_container(cfg.scenario.steps), float(cfg.duration))
+        events = step_events(record["scenario"]["steps"], float(record["duration"]))
         plot_tracking(time, reference, responses, events, out / "tracking.png",
                       "Seed 003 on the quadrotor, run 0: EKF in vs EKF out (noisy states fed)")  # fmt: skip
         pd.DataFrame(errors).to_csv(out / "model_error.csv", index=False)

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -50,37 +50,25 @@ class ClosedLoopConf:
     transient_window: float | None = None
 
 
-def closed_loop_settings(node) -> ClosedLoopConf:
-    """The :class:`ClosedLoopConf` of a ``closed_loop`` config node."""
-    return ClosedLoopConf(
-        state_sensor=StateSensorConf(**{k: float(v) for k, v in node.state_sensor.items()}),
-        max_tilt=float(node.max_tilt),
-        ground_depth=float(node.ground_depth),
-        settling_band=float(node.settling_band),
-        steady_window=float(node.steady_window),
-        transient_window=None if node.get("transient_window") is None else float(node.transient_window),
-    )
-
-
-def validate_loop(cfg) -> None:
-    """One-line :class:`ConfigError` for a bad ``loop`` or ``closed_loop`` setting, before any work."""
-    loop = cfg.get("loop", "open")
+def validate_loop(loop: str, model_name: str, closed_loop: ClosedLoopConf) -> None:
+    """One-line :class:`ConfigError` for a bad ``loop`` (for ``model=<model_name>``) or
+    ``closed_loop`` setting, before any work."""
     if loop not in LOOPS:
         raise ConfigError("loop", loop, f"one of {list(LOOPS)}")
     if loop == "open":
         return
-    if cfg.model.name not in CONTROLLED_MODELS:
+    if model_name not in CONTROLLED_MODELS:
         raise ConfigError(
-            "loop", loop, f"'open' only for model={cfg.model.name} (no controller flies on its filter state); "
+            "loop", loop, f"'open' only for model={model_name} (no controller flies on its filter state); "
             f"closed loops need model in {list(CONTROLLED_MODELS)}",
         )  # fmt: skip
-    c = cfg.closed_loop
-    for key, value in c.state_sensor.items():
-        require_non_negative(f"closed_loop.state_sensor.{key}", value)
+    c = closed_loop
+    for f in fields(c.state_sensor):
+        require_non_negative(f"closed_loop.state_sensor.{f.name}", getattr(c.state_sensor, f.name))
     require_positive("closed_loop.max_tilt", c.max_tilt, "must be > 0 rad")
     require_non_negative("closed_loop.ground_depth", c.ground_depth)
     if not 0.0 < c.settling_band < 1.0:
         raise ConfigError("closed_loop.settling_band", c.settling_band, "must lie in (0, 1) (fraction of the step)")
     require_positive("closed_loop.steady_window", c.steady_window, "must be > 0 seconds")
-    if c.get("transient_window") is not None:
+    if c.transient_window is not None:
         require_positive("closed_loop.transient_window", c.transient_window, "must be > 0 seconds, or null")

@@ -16,25 +16,38 @@ would otherwise reward losing the hard runs.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
+from dataclasses import dataclass
 
 from quadest.errors import ConfigError
 
 
-def validate_objective(cfg) -> None:
-    """Raise :class:`ConfigError` if ``objective`` names an estimator that is not selected or has a
-    negative penalty; nothing to check when ``objective.estimator`` is unset."""
-    objective = cfg.objective
+@dataclass
+class ObjectiveConf:
+    """The ``objective`` node (set by conf/hparams_search/): what a tuning sweep minimises, the mean
+    log-RMSE of the filter states of ``estimator`` plus ``nees_penalty`` times the fraction of steps
+    with NEES outside its 95 % band (module docstring). With ``estimator`` set, the task returns it
+    (Hydra's Optuna sweeper reads that)."""
+
+    estimator: str | None = None  # None: no objective
+    nees_penalty: float = 1.0
+
+
+def validate_objective(objective: ObjectiveConf, estimators: Collection[str]) -> None:
+    """Raise :class:`ConfigError` if ``objective`` names an estimator that is not among the selected
+    ``estimators`` (labels) or has a negative penalty; nothing to check when ``objective.estimator``
+    is unset."""
     if objective.estimator is None:
         return
-    if objective.estimator not in cfg.estimator:
+    if objective.estimator not in estimators:
         raise ConfigError(
-            "objective.estimator", objective.estimator, f"one of the selected estimators {sorted(cfg.estimator)}"
+            "objective.estimator", objective.estimator, f"one of the selected estimators {sorted(estimators)}"
         )
     if not objective.nees_penalty >= 0:
         raise ConfigError("objective.nees_penalty", objective.nees_penalty, "must be >= 0")
 
 
-def objective_value(objective, summary: dict) -> float:
+def objective_value(objective: ObjectiveConf, summary: dict) -> float:
     """J of the module docstring for ``objective.estimator`` in a job's ``summary`` (run_job's)."""
     est = summary["estimators"][objective.estimator]
     rmse = [r["mean"] for r in est["rmse"].values() if r["quantity"] == "filter"]

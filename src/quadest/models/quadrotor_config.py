@@ -1,55 +1,59 @@
-"""The quadrotor's config nodes as the objects the simulation and its filter model take:
-physical parameters, controller gains, scenario, sensor triads and the filter's Q and R."""
+"""The quadrotor's typed settings (schema instances, :class:`~quadest.config.settings.DataSettings`)
+as the objects the simulation and its filter model take: physical parameters, controller gains,
+scenario, sensor triads and the filter's Q and R."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
 from quadest.quadrotor.controller import BacksteppingGains
 from quadest.quadrotor.params import QuadrotorParams
-from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.quadrotor.scenarios import SCENARIOS, Scenario
 from quadest.sensors.mimu import TriadSpec
 
 
-def quadrotor_params(model_cfg) -> QuadrotorParams:
-    """Physical parameters of ``cfg.model``."""
+def quadrotor_params(model: Any) -> QuadrotorParams:
+    """Physical parameters of the ``model`` settings (a :class:`~quadest.models.schemas.QuadrotorFlightConf`)."""
     return QuadrotorParams(
-        mass=model_cfg.mass,
-        arm=model_cfg.arm,
-        inertia=tuple(model_cfg.inertia),
-        rotor_inertia=model_cfg.rotor_inertia,
-        thrust_factor=model_cfg.thrust_factor,
-        drag_factor=model_cfg.drag_factor,
-        gravity=model_cfg.gravity,
-        translational_drag=tuple(model_cfg.translational_drag),
-        rotational_drag=tuple(model_cfg.rotational_drag),
-        motor_time_constant=model_cfg.motor_time_constant,
-        rotor_speed_min=model_cfg.rotor_speed_min,
-        rotor_speed_max=model_cfg.rotor_speed_max,
+        mass=model.mass,
+        arm=model.arm,
+        inertia=tuple(model.inertia),
+        rotor_inertia=model.rotor_inertia,
+        thrust_factor=model.thrust_factor,
+        drag_factor=model.drag_factor,
+        gravity=model.gravity,
+        translational_drag=tuple(model.translational_drag),
+        rotational_drag=tuple(model.rotational_drag),
+        motor_time_constant=model.motor_time_constant,
+        rotor_speed_min=model.rotor_speed_min,
+        rotor_speed_max=model.rotor_speed_max,
     )
 
 
-def controller_gains(controller_cfg) -> BacksteppingGains:
-    """Backstepping gains of ``cfg.model.controller``."""
-    c = controller_cfg
+def controller_gains(controller: Any) -> BacksteppingGains:
+    """Backstepping gains of ``model.controller`` (a :class:`~quadest.models.schemas.ControllerConf`)."""
+    c = controller
     return BacksteppingGains(
         position=tuple(c.position), altitude=tuple(c.altitude), attitude=tuple(c.attitude), yaw=tuple(c.yaw),
         max_tilt=c.max_tilt,
     )  # fmt: skip
 
 
-def scenario(scenario_cfg):
-    """The scenario object of ``cfg.scenario``."""
-    scenario_cls = SCENARIOS[scenario_cfg.name]
-    return scenario_cls(**{k: scenario_cfg[k] for k in scenario_cls.__dataclass_fields__})
+def scenario(settings: Any) -> Scenario:
+    """A fresh scenario object of the ``scenario`` settings (an instance of its schema class)."""
+    scenario_cls = SCENARIOS[settings.name]
+    return scenario_cls(**{k: getattr(settings, k) for k in scenario_cls.__dataclass_fields__})
 
 
-def triad_spec(triad_cfg, error_scale: float) -> TriadSpec:
-    """Error specification of ``cfg.sensor.accel`` or ``cfg.sensor.gyro``, scaled by ``error_scale``."""
-    return TriadSpec(**{k: float(triad_cfg[k]) for k in TriadSpec.__dataclass_fields__}).scaled(error_scale)
+def triad_spec(triad: TriadSpec, error_scale: float) -> TriadSpec:
+    """Error specification of ``sensor.accel`` or ``sensor.gyro`` (a triad's settings), scaled by
+    ``error_scale``."""
+    return TriadSpec(**{k: float(getattr(triad, k)) for k in TriadSpec.__dataclass_fields__}).scaled(error_scale)
 
 
-def group_diagonal(state_names: tuple[str, ...], by_group) -> np.ndarray:
+def group_diagonal(state_names: tuple[str, ...], by_group: Any) -> np.ndarray:
     """Per-state values from per-group settings (``velocity``, ``angle``, ``angle_rate``)."""
 
     def group(name: str) -> str:
@@ -57,7 +61,7 @@ def group_diagonal(state_names: tuple[str, ...], by_group) -> np.ndarray:
             return "velocity"
         return "angle_rate" if name.endswith("_dot") else "angle"
 
-    return np.array([float(by_group[group(s)]) for s in state_names])
+    return np.array([float(getattr(by_group, group(s))) for s in state_names])
 
 
 def measurement_covariance(

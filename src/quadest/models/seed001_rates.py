@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadest.config.ranges import require_positive
+from quadest.config.settings import DataSettings
 from quadest.models.base import FilterModel
 from quadest.models.config_checks import validate_quadrotor
 from quadest.quadrotor.dynamics import body_angular_accel, body_rate_jacobian, rotor_inputs
@@ -74,8 +75,8 @@ class RateModel(FilterModel):
         return np.broadcast_to(np.eye(3), (*x.shape[:2], 3, 3)).copy()
 
 
-def validate_seed001_rates(cfg) -> None:
+def validate_seed001_rates(settings: DataSettings) -> None:
     """Range checks of ``model=seed001_rates``: the quadrotor's, plus the filters' noise."""
-    validate_quadrotor(cfg)
+    validate_quadrotor(settings)
     for key in ("Q", "R", "P0"):
-        require_positive(f"model.{key}", cfg.model[key])
+        require_positive(f"model.{key}", getattr(settings.model, key))

@@ -30,10 +30,13 @@ The Monte Carlo data (open loop, and the closed loop's shared flight) is built b
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from quadest.config.closed_loop import closed_loop_settings
+from quadest.config.closed_loop import ClosedLoopConf
 from quadest.config.ranges import require_positive
+from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.models.base import FilterModel
 from quadest.models.config_checks import validate_quadrotor
@@ -101,9 +104,9 @@ class AttitudeRateModel(FilterModel):
         return truth[..., :0]
 
 
-def sensor_std(cfg) -> np.ndarray:
+def sensor_std(closed_loop: ClosedLoopConf) -> np.ndarray:
     """(5,) one-sigma noise of the state sensor on (φ, θ, p, q, r), from ``closed_loop.state_sensor``."""
-    s = closed_loop_settings(cfg.closed_loop).state_sensor
+    s = closed_loop.state_sensor
     return np.array([s.angle, s.angle, s.rate, s.rate, s.rate])
 
 
@@ -119,25 +122,26 @@ def state_sensor_normals(streams: dict, samples: int) -> np.ndarray:
     return np.stack([rng.standard_normal((samples, 12)) for rng in streams["state_sensor"]])
 
 
-def seed003_filter_model(cfg, runs: int) -> AttitudeRateModel:
-    """The filter model of ``cfg.model`` (Q and R diagonal from ``model.Q``, ``model.R``)."""
+def seed003_filter_model(model: Any, sample_period: float, runs: int) -> AttitudeRateModel:
+    """The filter model of the ``model`` settings (a
+    :class:`~quadest.models.schemas.Seed003AttitudeModelConf`; Q and R diagonal from ``model.Q``,
+    ``model.R``) at ``sample_period``, bound to ``runs`` runs."""
     from quadest.models.quadrotor_config import quadrotor_params
 
-    m = cfg.model
     return AttitudeRateModel(
-        quadrotor_params(m), float(cfg.sample_period), np.diag(list(m.Q)), np.diag(list(m.R)), runs
+        quadrotor_params(model), float(sample_period), np.diag(list(model.Q)), np.diag(list(model.R)), runs
     )
 
 
-def validate_seed003_attitude(cfg) -> None:
+def validate_seed003_attitude(settings: DataSettings) -> None:
     """Range checks of ``model=seed003_attitude``: the quadrotor's, and Q and R, five positive
     variances each (a zero in R would make the posterior covariance singular)."""
-    validate_quadrotor(cfg)
+    validate_quadrotor(settings)
     for key in ("Q", "R"):
-        values = list(cfg.model[key])
+        values = list(getattr(settings.model, key))
         if len(values) != 5:
             raise ConfigError(f"model.{key}", values, "five variances, in the order (phi, theta, p, q, r)")
-    for i, (q, r) in enumerate(zip(cfg.model.Q, cfg.model.R, strict=True)):
+    for i, (q, r) in enumerate(zip(settings.model.Q, settings.model.R, strict=True)):
         require_positive(f"model.Q[{i}]", q)
         require_positive(f"model.R[{i}]", r)
 

@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from quadest.config.ranges import require_positive
+from quadest.config.settings import DataSettings
 from quadest.models.base import FilterModel
 
 
@@ -82,8 +83,8 @@ class UPFBenchmarkModel(FilterModel):
         return np.where(v > 0, logp, -np.inf)
 
 
-def validate_upf_benchmark(cfg) -> None:
+def validate_upf_benchmark(settings: DataSettings) -> None:
     """Range checks of ``model=upf_benchmark``."""
-    m = cfg.model
+    m = settings.model
     for key in ("Q", "R", "gamma_shape", "gamma_rate", "P0"):
-        require_positive(f"model.{key}", m[key])
+        require_positive(f"model.{key}", getattr(m, key))

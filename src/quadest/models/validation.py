@@ -22,6 +22,7 @@ from types import ModuleType
 
 import numpy as np
 
+from quadest.config.settings import DataSettings
 from quadest.models.base import FilterModel
 from quadest.models.functional import LinearGaussianModel
 from quadest.numerics.square_root import kernel_backend
@@ -37,9 +38,9 @@ def _kernels() -> ModuleType | None:
     return validation_kernels
 
 
-def constant_velocity_model(cfg, runs: int) -> LinearGaussianModel:
-    """The ``linear`` model from its config node."""
-    T, m = float(cfg.sample_period), cfg.model
+def constant_velocity_model(settings: DataSettings, runs: int) -> LinearGaussianModel:
+    """The ``linear`` model from its ``model`` settings and ``sample_period``."""
+    T, m = float(settings.sample_period), settings.model
     A = np.eye(4)
     A[0, 2] = A[1, 3] = T
     C = np.eye(2, 4)

@@ -30,11 +30,14 @@ aligned log (:mod:`quadest.replay.align`), in PX4's frames (body FRD, earth NED)
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from quadest.config.ranges import require_non_negative
+from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.quadrotor_config import triad_spec
@@ -59,27 +62,39 @@ def shipped_log() -> Path:
     raise FileNotFoundError(f"the shipped PX4 log is missing from {_PACKAGE / 'data/px4'}; reinstall quadest")
 
 
-def log_path(cfg) -> Path:
-    """``source.path``, or the shipped log when it is null."""
-    return shipped_log() if cfg.source.path is None else Path(str(cfg.source.path)).expanduser()
+@dataclass
+class SourceConf:
+    """The ``source`` node: a recorded flight log replayed instead of the simulation (docs/replay.md;
+    null: simulate). ``path`` null is the shipped PX4 log; ``start`` skips seconds of the log;
+    differences to the log's reference count from ``warmup`` seconds after the start."""
+
+    name: str = "px4"
+    path: str | None = None
+    start: float = 0.0
+    warmup: float = 5.0
 
 
-def validate_replay(cfg) -> None:
-    """Checks of a replay's settings, before any work (called by :func:`quadest.app.validate.validate`)."""
-    if cfg.model.name != "attitude":
-        raise ConfigError("model.name", cfg.model.name, "'attitude' for a log replay (source.name=px4)")
-    if cfg.runs != 1:
-        raise ConfigError("runs", cfg.runs, "1 for a log replay (a log is one run)")
-    if cfg.output.saved_runs < 1:
-        raise ConfigError("output.saved_runs", cfg.output.saved_runs, ">= 1 (a replay compares the saved estimates)")
-    if cfg.source.name != "px4":
-        raise ConfigError("source.name", cfg.source.name, "'px4' (a PX4 ULog file), or source=null to simulate")
-    require_non_negative("source.start", cfg.source.start)
-    require_non_negative("source.warmup", cfg.source.warmup)
-    if not log_path(cfg).is_file():
-        raise ConfigError(
-            "source.path", str(cfg.source.path), "an existing PX4 ULog file (.ulg), or null: the shipped log"
-        )
+def log_path(path: Any) -> Path:
+    """The log of ``source.path`` ``path``, or the shipped log when it is null."""
+    return shipped_log() if path is None else Path(str(path)).expanduser()
+
+
+def validate_replay(settings: DataSettings, saved_runs: int) -> None:
+    """Checks of a replay's settings (``saved_runs``: ``output.saved_runs``), before any work
+    (called by :func:`quadest.app.validate.validate`)."""
+    source = settings.source
+    if settings.model.name != "attitude":
+        raise ConfigError("model.name", settings.model.name, "'attitude' for a log replay (source.name=px4)")
+    if settings.runs != 1:
+        raise ConfigError("runs", settings.runs, "1 for a log replay (a log is one run)")
+    if saved_runs < 1:
+        raise ConfigError("output.saved_runs", saved_runs, ">= 1 (a replay compares the saved estimates)")
+    if source.name != "px4":
+        raise ConfigError("source.name", source.name, "'px4' (a PX4 ULog file), or source=null to simulate")
+    require_non_negative("source.start", source.start)
+    require_non_negative("source.warmup", source.warmup)
+    if not log_path(source.path).is_file():
+        raise ConfigError("source.path", str(source.path), "an existing PX4 ULog file (.ulg), or null: the shipped log")
 
 
 def tilt(accel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -115,12 +130,12 @@ def initial_state(aligned: AlignedLog) -> np.ndarray:
 
 
 def replay_noise(
-    cfg, T: float, mag_period: float, duration: float
+    settings: DataSettings, T: float, mag_period: float, duration: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``Q`` (9, 9) per step, ``R_acc``, ``R_mag`` (3, 3) and ``P0`` (9, 9), by the formulas of
     ``model=attitude`` without aiding (module docstring of :mod:`quadest.simulation.attitude_data`)."""
-    m, scale = cfg.model, float(cfg.sensor.error_scale)
-    accel, gyro = triad_spec(cfg.sensor.accel, scale), triad_spec(cfg.sensor.gyro, scale)
+    m, scale = settings.model, float(settings.sensor.error_scale)
+    accel, gyro = triad_spec(settings.sensor.accel, scale), triad_spec(settings.sensor.gyro, scale)
     mag = TriadSpec(
         white_noise=float(m.magnetometer.white_noise), bias_random_walk=float(m.magnetometer.bias_random_walk)
     )
@@ -135,23 +150,23 @@ def replay_noise(
     return Q, R_acc, R_mag, P0
 
 
-def build_replay_data(cfg) -> MonteCarloData:
+def build_replay_data(settings: DataSettings) -> MonteCarloData:
     """Read ``source.path``, align it to ``sample_period`` and bind the attitude model to it
-    (``cfg`` validated, :func:`validate_replay` included)."""
-    path = log_path(cfg)
+    (``settings`` validated, :func:`validate_replay` included)."""
+    path = log_path(settings.source.path)
     log = read_flight_log(path)
-    T = float(cfg.sample_period)
-    aligned = align(log, T, float(cfg.source.start), float(cfg.duration))
+    T = float(settings.sample_period)
+    aligned = align(log, T, float(settings.source.start), float(settings.duration))
     aligned_uT = dataclasses.replace(aligned, mag=aligned.mag * GAUSS_TO_MICROTESLA)
     mag_period = float(np.median(np.diff(log.mag_time)))
-    Q, R_acc, R_mag, P0 = replay_noise(cfg, T, mag_period, float(aligned.time[-1] - aligned.time[0]))
+    Q, R_acc, R_mag, P0 = replay_noise(settings, T, mag_period, float(aligned.time[-1] - aligned.time[0]))
     g_e = np.array([0.0, 0.0, float(np.median(np.linalg.norm(aligned.accel, axis=1)))])
     model = AttitudeFilterModel(T, g_e, earth_field(aligned_uT), Q, R_acc, R_mag)
     K1 = aligned.time.size
     reference = np.concatenate([aligned.reference_q, np.zeros((K1, 6))], axis=-1)  # [q, b_g = 0, b_a = 0]
     labels = {
         "model": "attitude", "source": "px4", "log": path.name, "layout": log.layout, "reference": REFERENCE,
-        "warmup": float(cfg.source.warmup), "bridged_gaps": aligned.gaps, "longest_gap": aligned.longest_gap,
+        "warmup": float(settings.source.warmup), "bridged_gaps": aligned.gaps, "longest_gap": aligned.longest_gap,
     }  # fmt: skip
     return MonteCarloData(
         model=model,
@@ -163,7 +178,7 @@ def build_replay_data(cfg) -> MonteCarloData:
         x0=initial_state(aligned_uT)[None],
         P0=P0,
         companion0=np.zeros((1, 0)),
-        estimator_seeds=run_seed_sequences(int(cfg.seed), 1)["estimator"],
+        estimator_seeds=run_seed_sequences(int(settings.seed), 1)["estimator"],
         labels=labels,
         sensors={"mag": SensorRecord(np.nan_to_num(aligned_uT.mag)[None], aligned.mag_available)},
     )

@@ -49,11 +49,11 @@ class NoiseLaw:
     length: int = 10
 
 
-def noise_law_from_config(node) -> NoiseLaw:
-    """The :class:`NoiseLaw` of a ``sensor.<triad>.noise_law`` config node (``None``: Gaussian)."""
-    if node is None:
+def noise_law_from_config(law: NoiseLaw | None) -> NoiseLaw:
+    """A copy of the ``sensor.<triad>.noise_law`` settings ``law`` (``None``: Gaussian)."""
+    if law is None:
         return NoiseLaw()
-    return NoiseLaw(**{k: node[k] for k in NoiseLaw.__dataclass_fields__ if k in node})
+    return NoiseLaw(**{k: getattr(law, k) for k in NoiseLaw.__dataclass_fields__})
 
 
 def check_noise_law(key: str, law) -> None:

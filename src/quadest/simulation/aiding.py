@@ -12,9 +12,10 @@ Every sensor goes through the same three calls, so no model knows a sensor by na
   :func:`~quadest.montecarlo.streams.named_streams`), then
   gives the filters its model on the model's :class:`~quadest.sensors.base.StateLayout`.
 
-The settings node of a sensor (``sensor.<name>``, or the sensor's ``settings_key``) becomes an
-instance of its ``Settings`` with ``OmegaConf.to_object``: the one use of OmegaConf below the
-application layer (docs/layout.md).
+The settings of each sensor (its node ``sensor.<name>``, or the sensor's ``settings_key``, as an
+instance of its ``Settings``) come made: the application layer converts them with the rest of
+the config (:func:`quadest.app.settings.aiding_settings`) into
+:attr:`DataSettings.aiding <quadest.config.settings.DataSettings.aiding>`.
 """
 
 from __future__ import annotations
@@ -22,8 +23,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
-
+from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError, PluginError
 from quadest.montecarlo.streams import named_streams
 from quadest.sensors.base import Sensor, SensorContext, SensorModel, StateLayout, TrueMotion
@@ -33,26 +33,21 @@ from quadest.sensors.registry import discover, is_builtin
 _warned: set[str] = set()
 
 
-def sensor_settings(cfg: Any, cls: type[Sensor]) -> Any:
-    """The instance of ``cls.Settings`` at ``cls.key()`` in ``cfg`` (``None`` if there is no such
-    node)."""
-    node = OmegaConf.select(cfg, cls.key())
-    if not isinstance(node, DictConfig):
-        return None
-    if OmegaConf.get_type(node) is not cls.Settings:
-        node = OmegaConf.merge(OmegaConf.structured(cls.Settings), node)
-    return OmegaConf.to_object(node)
+def sensor_settings(settings: DataSettings, name: str) -> Any:
+    """The settings of sensor ``name`` of ``model.aiding`` (an instance of its ``Settings``), or
+    ``None`` if the config has no node for them."""
+    return settings.aiding.get(name)
 
 
-def sensor_context(cfg: Any) -> SensorContext:
+def sensor_context(settings: DataSettings) -> SensorContext:
     """The job settings the sensors read (:class:`~quadest.sensors.base.SensorContext`); a model
-    without ``calibrated`` or ``measurement_noise_inflation`` gets ``True`` and 1."""
+    whose schema has no ``calibrated`` or ``measurement_noise_inflation`` gets ``True`` and 1."""
     return SensorContext(
-        sample_period=float(cfg.sample_period),
-        duration=float(cfg.duration),
-        error_scale=float(cfg.sensor.error_scale),
-        calibrated=bool(cfg.model.get("calibrated", True)),
-        noise_inflation=float(cfg.model.get("measurement_noise_inflation", 1.0)),
+        sample_period=float(settings.sample_period),
+        duration=float(settings.duration),
+        error_scale=float(settings.sensor.error_scale),
+        calibrated=bool(getattr(settings.model, "calibrated", True)),
+        noise_inflation=float(getattr(settings.model, "measurement_noise_inflation", 1.0)),
     )
 
 
@@ -68,10 +63,10 @@ def report_plugin_problems(selected: list[str]) -> None:
             print(f"quadest: warning: {message}", file=sys.stderr)
 
 
-def _selected(cfg: Any) -> dict[str, type[Sensor]]:
-    """The sensor classes of ``cfg.model.aiding`` in order; one-line errors for unknown, repeated
-    or broken ones."""
-    names = list(cfg.model.aiding)
+def _selected(settings: DataSettings) -> dict[str, type[Sensor]]:
+    """The sensor classes of ``model.aiding`` in order; one-line errors for unknown, repeated or
+    broken ones."""
+    names = list(settings.model.aiding)
     report_plugin_problems(names)
     sensors = discover()[0]
     for name in names:
@@ -80,41 +75,41 @@ def _selected(cfg: Any) -> dict[str, type[Sensor]]:
     return {name: sensors[name] for name in names}
 
 
-def validate_aiding(cfg: Any, layout: StateLayout) -> None:
-    """Check ``cfg.model.aiding`` against the sensors and the model's ``layout`` before any work
+def validate_aiding(settings: DataSettings, layout: StateLayout) -> None:
+    """Check ``model.aiding`` against the sensors and the model's ``layout`` before any work
     (module docstring); raise :class:`ConfigError` on the first problem."""
-    names = list(cfg.model.aiding)
-    for name, cls in _selected(cfg).items():
+    names = list(settings.model.aiding)
+    for name, cls in _selected(settings).items():
         missing = [q for q in cls.measures if q not in layout.quantities]
         if missing:
             raise ConfigError(
                 "model.aiding",
                 names,
-                f"sensor '{name}' measures {', '.join(missing)}, which model={cfg.model.name} does not estimate "
+                f"sensor '{name}' measures {', '.join(missing)}, which model={settings.model.name} does not estimate "
                 f"(it offers {', '.join(layout.quantities) or 'none'})",
             )
-        settings = sensor_settings(cfg, cls)
-        if settings is None:
+        own = sensor_settings(settings, name)
+        if own is None:
             raise ConfigError(
                 "model.aiding",
                 names,
                 f"sensor '{name}' reads its settings from {cls.key()}, which is not in the config",
             )
-        cls.validate(settings, cls.key(), float(cfg.sample_period))
+        cls.validate(own, cls.key(), float(settings.sample_period))
 
 
 def measure_aiding(
-    cfg: Any, truth: TrueMotion, streams: dict[str, list], layout: StateLayout
+    settings: DataSettings, truth: TrueMotion, streams: dict[str, list], layout: StateLayout
 ) -> tuple[dict[str, SensorRecord], dict[str, SensorModel]]:
-    """The samples of every sensor of ``cfg.model.aiding`` and the filters' models of them, by
+    """The samples of every sensor of ``model.aiding`` and the filters' models of them, by
     name in update order. ``streams`` are the runs' streams (:func:`~quadest.montecarlo.streams.run_streams`):
     a built-in sensor draws from those it names; every other stream, all of a plugin's and a new
     in-repository sensor's, is named after the sensor (``sensor:<name>:<stream>``)."""
-    context = sensor_context(cfg)
-    runs, seed = truth.position.shape[0], int(cfg.seed)
+    context = sensor_context(settings)
+    runs, seed = truth.position.shape[0], int(settings.seed)
     records, models = {}, {}
-    for name, cls in _selected(cfg).items():
-        sensor = cls(sensor_settings(cfg, cls), context)
+    for name, cls in _selected(settings).items():
+        sensor = cls(sensor_settings(settings, name), context)
         own = {
             s: streams[s] if is_builtin(cls) and s in streams else named_streams(seed, runs, f"sensor:{name}:{s}")
             for s in cls.stream_names()

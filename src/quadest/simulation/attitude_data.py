@@ -25,6 +25,7 @@ import copy
 import numpy as np
 
 from quadest.config.ranges import require_non_negative, require_positive
+from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.config_checks import validate_quadrotor
@@ -53,7 +54,7 @@ def _measure_with_truth_bias(spec: TriadSpec, errors: TriadErrors, y: np.ndarray
 
 
 def _mag_spec(mcfg, scale: float) -> TriadSpec:
-    return TriadSpec(**{k: float(mcfg.magnetometer[k]) for k in TriadSpec.__dataclass_fields__}).scaled(scale)
+    return TriadSpec(**{k: float(getattr(mcfg.magnetometer, k)) for k in TriadSpec.__dataclass_fields__}).scaled(scale)
 
 
 def interval_average(samples: np.ndarray) -> np.ndarray:
@@ -66,33 +67,34 @@ def interval_average(samples: np.ndarray) -> np.ndarray:
     return out
 
 
-def validate_attitude(cfg) -> None:
+def validate_attitude(settings: DataSettings) -> None:
     """Range checks of ``model=attitude``: the quadrotor's (it flies the truth), the magnetometer's
     and the filters' noise."""
-    validate_quadrotor(cfg)
-    m = cfg.model
+    validate_quadrotor(settings)
+    m = settings.model
     require_positive("model.acceleration_std", m.acceleration_std)
     require_positive("model.magnetometer.rate", m.magnetometer.rate, "must be > 0 Hz")
-    sample_stride(float(m.magnetometer.rate), float(cfg.sample_period))
+    sample_stride(float(m.magnetometer.rate), float(settings.sample_period))
     if len(m.magnetometer.earth_field) != 3 or not any(m.magnetometer.earth_field):
         raise ConfigError("model.magnetometer.earth_field", list(m.magnetometer.earth_field), "3 values, not all 0")
     for key in TriadSpec.__dataclass_fields__:
-        require_non_negative(f"model.magnetometer.{key}", m.magnetometer[key])
+        require_non_negative(f"model.magnetometer.{key}", getattr(m.magnetometer, key))
     require_positive(
         "model.magnetometer.white_noise", m.magnetometer.white_noise, "must be > 0 (R_mag is built from it)"
     )
     require_non_negative("model.attitude_process_noise.attitude", m.attitude_process_noise.attitude)
     require_positive("model.attitude_process_noise.inflation", m.attitude_process_noise.inflation)
     for key in ("attitude", "gyro_bias", "accel_bias"):
-        require_positive(f"model.attitude_initial_std.{key}", m.attitude_initial_std[key], "must be > 0 (P0 from it)")
+        std = getattr(m.attitude_initial_std, key)
+        require_positive(f"model.attitude_initial_std.{key}", std, "must be > 0 (P0 from it)")
 
 
-def build_attitude_data(cfg) -> MonteCarloData:
-    """Fly the scenario for ``cfg.runs`` runs and record what the attitude filters see."""
-    mcfg, scfg = cfg.model, cfg.sensor
-    runs, T, seed = int(cfg.runs), float(cfg.sample_period), int(cfg.seed)
+def build_attitude_data(settings: DataSettings) -> MonteCarloData:
+    """Fly the scenario for ``settings.runs`` runs and record what the attitude filters see."""
+    mcfg, scfg = settings.model, settings.sensor
+    runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
     streams = run_streams(seed, runs)
-    _, flown, truth = fly_scenario(cfg, streams)
+    _, flown, truth = fly_scenario(settings, streams)
     g_e = np.array([0.0, 0.0, -float(mcfg.gravity)])
     m_e = np.array(mcfg.magnetometer.earth_field, dtype=float)
 
@@ -102,8 +104,8 @@ def build_attitude_data(cfg) -> MonteCarloData:
     accel_errors = draw_triad_errors(accel, streams["accel_errors"])
     gyro_errors = draw_triad_errors(gyro, streams["gyro_errors"])
     mag_errors = draw_triad_errors(mag, streams["mag_errors"])
-    accel_law = noise_law_from_config(scfg.accel.get("noise_law"))
-    gyro_law = noise_law_from_config(scfg.gyro.get("noise_law"))
+    accel_law = noise_law_from_config(scfg.accel.noise_law)
+    gyro_law = noise_law_from_config(scfg.gyro.noise_law)
     angles = truth.state[..., 6:9]
     z_acc, accel_bias = _measure_with_truth_bias(
         accel, accel_errors, truth.specific_force, T, streams["accel_noise"], accel_law
@@ -123,7 +125,7 @@ def build_attitude_data(cfg) -> MonteCarloData:
     Q = inflation * np.diag([q_att] * 3 + [gyro.bias_random_walk**2 * T] * 3 + [accel.bias_random_walk**2 * T] * 3)
     r_acc = accel.white_noise_std(T) ** 2 + (0.0 if known else float(mcfg.acceleration_std) ** 2)
     mag_period = sample_stride(rate, T) * T
-    r_mag = mag.white_noise_std(mag_period) ** 2 + mag.bias_random_walk**2 * float(cfg.duration) / 2.0
+    r_mag = mag.white_noise_std(mag_period) ** 2 + mag.bias_random_walk**2 * float(settings.duration) / 2.0
     noise = float(mcfg.measurement_noise_inflation)
     assumed = (gyro_errors, accel_errors, mag_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 3
     model = AttitudeFilterModel(
@@ -155,5 +157,10 @@ def build_attitude_data(cfg) -> MonteCarloData:
 
 
 MODEL = ModelSpec(  # n_err = 9: attitude error, gyro and accelerometer biases
-    "attitude", AttitudeModelConf, build_attitude_data, lambda cfg: 9, validate_attitude, uses_quadrotor_groups=True
+    "attitude",
+    AttitudeModelConf,
+    build_attitude_data,
+    lambda _: 9,
+    validate_attitude,
+    uses_quadrotor_groups=True,
 )

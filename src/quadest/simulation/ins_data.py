@@ -4,12 +4,12 @@ aiding sensors, and bind :class:`~quadest.models.ins.InsFilterModel` to the runs
 - Truth: :func:`~quadest.simulation.quadrotor_data.fly_scenario`; the attitude as a quaternion of
   the truth's ZYX Euler angles; the true biases are each run's turn-on bias plus its random-walk
   drift (:func:`quadest.simulation.attitude_data._measure_with_truth_bias`).
-- IMU (the input): the MIMU of ``cfg.sensor`` with its own streams (so adding an aiding sensor
+- IMU (the input): the MIMU of ``settings.sensor`` with its own streams (so adding an aiding sensor
   changes no MIMU draw) measuring, at each sample, the mean of the true rate and specific force
   over the step that follows (trapezoid of the truth's samples: a Δθ/Δv IMU).
 - Aiding sensors: ``model.aiding`` in update order, any registered sensor
   (:mod:`quadest.sensors.registry`; built in: ``gps``, ``barometer``, ``vision`` with settings
-  ``cfg.sensor.gps`` …, and ``magnetometer`` with ``model.magnetometer``, as ``model=attitude``),
+  ``settings.sensor.gps`` …, and ``magnetometer`` with ``model.magnetometer``, as ``model=attitude``),
   each from its own streams, through :mod:`quadest.simulation.aiding`: the INS offers them its
   attitude, position and velocity (:func:`~quadest.models.ins.ins_layout`).
 - Moving platform (scenario ``platform_approach``, docs/seed004-landing.md): the camera's beacons
@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadest.config.ranges import require_non_negative, require_positive
+from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.models.config_checks import validate_quadrotor
 from quadest.models.ins import CHARTS, InsFilterModel, ins_layout
@@ -55,19 +56,19 @@ def interval_means(y: np.ndarray) -> np.ndarray:
     return out
 
 
-def validate_ins(cfg) -> None:
+def validate_ins(settings: DataSettings) -> None:
     """Range checks of ``model=ins``: the quadrotor's (it flies the truth), the filters' noise and
     the aiding sensors in use (:func:`~quadest.simulation.aiding.validate_aiding`)."""
-    validate_quadrotor(cfg)
-    m = cfg.model
+    validate_quadrotor(settings)
+    m = settings.model
     if m.attitude_chart not in CHARTS:
         raise ConfigError("model.attitude_chart", m.attitude_chart, f"one of {list(CHARTS)}")
     for key in ("attitude", "position", "velocity"):
-        require_non_negative(f"model.ins_process_noise.{key}", m.ins_process_noise[key])
+        require_non_negative(f"model.ins_process_noise.{key}", getattr(m.ins_process_noise, key))
     require_positive("model.ins_process_noise.inflation", m.ins_process_noise.inflation)
     for key in ("attitude", "position", "velocity", "gyro_bias", "accel_bias"):
-        require_positive(f"model.ins_initial_std.{key}", m.ins_initial_std[key], "must be > 0 (P0 from it)")
-    validate_aiding(cfg, ins_layout(platform_input=True))
+        require_positive(f"model.ins_initial_std.{key}", getattr(m.ins_initial_std, key), "must be > 0 (P0 from it)")
+    validate_aiding(settings, ins_layout(platform_input=True))
 
 
 def process_noise(gyro, accel, extra, sample_period: float) -> np.ndarray:
@@ -86,19 +87,19 @@ def process_noise(gyro, accel, extra, sample_period: float) -> np.ndarray:
     return float(extra.inflation) * Q
 
 
-def build_ins_data(cfg) -> MonteCarloData:
-    """Fly the scenario for ``cfg.runs`` runs and record what the INS filters see."""
-    mcfg, scfg = cfg.model, cfg.sensor
-    runs, T, seed = int(cfg.runs), float(cfg.sample_period), int(cfg.seed)
+def build_ins_data(settings: DataSettings) -> MonteCarloData:
+    """Fly the scenario for ``settings.runs`` runs and record what the INS filters see."""
+    mcfg, scfg = settings.model, settings.sensor
+    runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
     streams = run_streams(seed, runs)
-    _, flown, truth = fly_scenario(cfg, streams)
+    _, flown, truth = fly_scenario(settings, streams)
 
     scale = float(scfg.error_scale)
     accel, gyro = triad_spec(scfg.accel, scale), triad_spec(scfg.gyro, scale)
     accel_errors = draw_triad_errors(accel, streams["accel_errors"])
     gyro_errors = draw_triad_errors(gyro, streams["gyro_errors"])
-    accel_law = noise_law_from_config(scfg.accel.get("noise_law"))
-    gyro_law = noise_law_from_config(scfg.gyro.get("noise_law"))
+    accel_law = noise_law_from_config(scfg.accel.noise_law)
+    gyro_law = noise_law_from_config(scfg.gyro.noise_law)
     z_acc, accel_bias = _measure_with_truth_bias(
         accel, accel_errors, interval_means(truth.specific_force), T, streams["accel_noise"], accel_law
     )
@@ -110,7 +111,7 @@ def build_ins_data(cfg) -> MonteCarloData:
 
     platform = flown.platform_position(truth.time) if isinstance(flown, PlatformApproach) else None
     motion = TrueMotion(truth.time, x_true[..., 4:7], x_true[..., 7:10], x_true[..., 0:4], platform)
-    records, aiding = measure_aiding(cfg, motion, streams, ins_layout(platform_input=platform is not None))
+    records, aiding = measure_aiding(settings, motion, streams, ins_layout(platform_input=platform is not None))
     assumed = (gyro_errors, accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
     Q = process_noise(gyro, accel, mcfg.ins_process_noise, T)
     model = InsFilterModel(
@@ -121,7 +122,7 @@ def build_ins_data(cfg) -> MonteCarloData:
 
     s0 = mcfg.ins_initial_std
     groups = ("attitude", "position", "velocity", "gyro_bias", "accel_bias")
-    P0 = np.diag(np.repeat([float(s0[k]) ** 2 for k in groups], 3))
+    P0 = np.diag(np.repeat([float(getattr(s0, k)) ** 2 for k in groups], 3))
     offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 15)), P0, streams["initial"])
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
@@ -146,5 +147,5 @@ def build_ins_data(cfg) -> MonteCarloData:
 
 
 MODEL = ModelSpec(  # n_err = 15
-    "ins", InsModelConf, build_ins_data, lambda cfg: 15, validate_ins, uses_quadrotor_groups=True
+    "ins", InsModelConf, build_ins_data, lambda _: 15, validate_ins, uses_quadrotor_groups=True
 )

@@ -22,6 +22,7 @@ import sys
 from functools import cache
 
 from quadest.config.plugin_entry_points import load_entry_points
+from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError, PluginError
 from quadest.montecarlo import MonteCarloData
 from quadest.simulation.spec import ModelSpec, spec_problems
@@ -71,13 +72,12 @@ def report_plugin_problems(selected: str) -> None:
             print(f"quadest: warning: {message}", file=sys.stderr)
 
 
-def model_spec(cfg) -> ModelSpec:
-    """The spec of ``cfg.model.name``.
+def model_spec(name: str) -> ModelSpec:
+    """The spec of option ``model.name`` = ``name``.
 
     Raises:
         ConfigError: an unknown name (the message lists the options), or a broken plugin's.
     """
-    name = cfg.model.name
     report_plugin_problems(name)
     specs = model_specs()
     if name not in specs:
@@ -85,15 +85,15 @@ def model_spec(cfg) -> ModelSpec:
     return specs[name]
 
 
-def state_dimension(cfg) -> int:
+def state_dimension(settings: DataSettings) -> int:
     """State dimension of the configured filter model."""
-    return model_spec(cfg).state_dimension(cfg)
+    return model_spec(settings.model.name).state_dimension(settings)
 
 
-def build_data(cfg) -> MonteCarloData:
+def build_data(settings: DataSettings) -> MonteCarloData:
     """Monte Carlo data of the configured model: simulated, or replayed from ``source`` (a flight log)."""
-    if cfg.get("source") is not None:
+    if settings.source is not None:
         from quadest.replay.data import build_replay_data  # docs/replay.md
 
-        return build_replay_data(cfg)
-    return model_spec(cfg).build(cfg)
+        return build_replay_data(settings)
+    return model_spec(settings.model.name).build(settings)

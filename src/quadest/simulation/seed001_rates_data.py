@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from quadest.config.settings import DataSettings
 from quadest.models.schemas import Seed001RatesModelConf
 from quadest.models.seed001_rates import RATES, ROTORS, RateModel, validate_seed001_rates
 from quadest.montecarlo import MonteCarloData
@@ -26,13 +27,13 @@ def propagate_rates(model: RateModel, start: np.ndarray, rotors: np.ndarray, noi
     return rates
 
 
-def build_seed001_rates_data(cfg) -> MonteCarloData:
+def build_seed001_rates_data(settings: DataSettings) -> MonteCarloData:
     """Fly the scenario for the rotor speeds, drive the rate model with N(0, Q·I) process noise
     from the flown initial rates (:func:`propagate_rates`), measure the rates with a white-noise
     gyro of variance ``R``; each run's initial estimate is drawn from N(true rates, P0·I)."""
-    m, runs, T, seed = cfg.model, int(cfg.runs), float(cfg.sample_period), int(cfg.seed)
+    m, runs, T, seed = settings.model, int(settings.runs), float(settings.sample_period), int(settings.seed)
     streams = run_streams(seed, runs)
-    params, flown, truth = fly_scenario(cfg, streams)
+    params, flown, truth = fly_scenario(settings, streams)
     rotors = truth.state[..., ROTORS]
     K1 = rotors.shape[1]
     model = RateModel(params, T, float(m.Q) * np.eye(3), float(m.R) * np.eye(3), runs)
@@ -55,7 +56,7 @@ MODEL = ModelSpec(
     "seed001_rates",
     Seed001RatesModelConf,
     build_seed001_rates_data,
-    lambda cfg: 3,
+    lambda _: 3,
     validate_seed001_rates,
     uses_quadrotor_groups=True,
     pcrlb_is_bound=True,  # the rates are driven by the filter model's own N(0, Q) process noise

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from quadest.config.settings import DataSettings
 from quadest.models.schemas import Seed003AttitudeModelConf
 from quadest.models.seed003_attitude import (
     ROTORS,
@@ -20,42 +21,42 @@ from quadest.simulation.quadrotor_data import fly_scenario
 from quadest.simulation.spec import ModelSpec
 
 
-def seed003_data(cfg, truth_state: np.ndarray, normals: np.ndarray, labels: dict) -> MonteCarloData:
+def seed003_data(settings: DataSettings, truth_state: np.ndarray, normals: np.ndarray, labels: dict) -> MonteCarloData:
     """The data of a flight ``truth_state`` (B, K+1, 16): the five states measured with the state
     sensor's noise from ``normals`` (B, K+1, 12), rotor speeds of the truth as input, and every run
     started at its first measurement with ``P0 = R``."""
     runs, K1 = truth_state.shape[:2]
-    model = seed003_filter_model(cfg, runs)
-    z = measure_states(truth_state, normals, sensor_std(cfg))
+    model = seed003_filter_model(settings.model, settings.sample_period, runs)
+    z = measure_states(truth_state, normals, sensor_std(settings.closed_loop))
     return MonteCarloData(
-        model, np.arange(K1) * float(cfg.sample_period), model.truth_to_state(truth_state),
+        model, np.arange(K1) * float(settings.sample_period), model.truth_to_state(truth_state),
         np.zeros((runs, K1, 0)), truth_state[..., ROTORS], z, z[:, 0].copy(), model.R.copy(), np.zeros((runs, 0)),
-        run_seed_sequences(int(cfg.seed), runs)["estimator"], labels,
+        run_seed_sequences(int(settings.seed), runs)["estimator"], labels,
     )  # fmt: skip
 
 
-def seed003_labels(cfg, scenario_name: str) -> dict:
+def seed003_labels(settings: DataSettings, scenario_name: str) -> dict:
     """The descriptive columns of a seed 003 job's metrics table."""
     return {
-        "model": cfg.model.name, "formulation": cfg.model.name, "calibrated": True, "sensor": "state_sensor",
+        "model": settings.model.name, "formulation": settings.model.name, "calibrated": True, "sensor": "state_sensor",
         "error_scale": np.nan, "scenario": scenario_name, "encoder_resolution": np.nan,
     }  # fmt: skip
 
 
-def build_seed003_attitude_data(cfg) -> MonteCarloData:
+def build_seed003_attitude_data(settings: DataSettings) -> MonteCarloData:
     """Open loop: fly the scenario on the truth (the controller reads the true state) and measure
     the five states with the state sensor."""
-    streams = run_streams(int(cfg.seed), int(cfg.runs))
-    _params, flown, truth = fly_scenario(cfg, streams)
+    streams = run_streams(int(settings.seed), int(settings.runs))
+    _params, flown, truth = fly_scenario(settings, streams)
     normals = state_sensor_normals(streams, truth.state.shape[1])
-    return seed003_data(cfg, truth.state, normals, seed003_labels(cfg, flown.name))
+    return seed003_data(settings, truth.state, normals, seed003_labels(settings, flown.name))
 
 
 MODEL = ModelSpec(
     "seed003_attitude",
     Seed003AttitudeModelConf,
     build_seed003_attitude_data,
-    lambda cfg: 5,
+    lambda _: 5,
     validate_seed003_attitude,
     uses_quadrotor_groups=True,
 )

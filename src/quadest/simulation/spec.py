@@ -2,8 +2,11 @@
 
 A model option is its config schema, the dimension of its filter's (error) state, its range
 checks, its Monte Carlo data builder and whether the PCRLB of its filter model bounds the
-filters' MSE. The registry (:mod:`quadest.simulation.registry`) finds the package's own specs in
-the modules of :mod:`quadest.simulation` and a plugin's through the entry-point group
+filters' MSE. The builder, the checks and the state dimension take the job's typed
+:class:`~quadest.config.settings.DataSettings` (``settings.model`` an instance of the spec's
+``schema``), never the raw config: the application layer converts it once
+(:mod:`quadest.app.settings`). The registry (:mod:`quadest.simulation.registry`) finds the
+package's own specs in the modules of :mod:`quadest.simulation` and a plugin's through the entry-point group
 ``quadest.models``; everything else (the ``/schema/model/<name>`` config store, the pre-run
 checks, the PCRLB caption) reads the spec.
 """
@@ -13,12 +16,12 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
+from quadest.config.settings import DataSettings
 from quadest.montecarlo import MonteCarloData
 
 
-def _no_checks(cfg: Any) -> None:
+def _no_checks(settings: DataSettings) -> None:
     """A model without range checks beyond its schema's types."""
 
 
@@ -30,11 +33,13 @@ class ModelSpec:
         name: the option's name: ``model.name`` and the YAML ``conf/model/<name>.yaml``.
         schema: the dataclass of the ``model`` node, stored as ``/schema/model/<name>`` (the
             YAML's default); it must have a ``name`` field.
-        build: ``build(cfg) -> MonteCarloData``, the data of ``cfg.runs`` runs.
-        state_dimension: ``state_dimension(cfg) -> int``, the dimension of the filter's error
+        build: ``build(settings) -> MonteCarloData``, the data of ``settings.runs`` runs
+            (``settings`` a :class:`~quadest.config.settings.DataSettings`: a builder reads the
+            Monte Carlo settings, the model, and the sensors and scenario it flies).
+        state_dimension: ``state_dimension(settings) -> int``, the dimension of the filter's error
             state (``n_err``; ``n`` for vector states), against which estimator parameters are
             checked before any work (the UT's ``n + λ > 0``).
-        validate: ``validate(cfg)`` raises :class:`~quadest.errors.ConfigError` naming the key of
+        validate: ``validate(settings)`` raises :class:`~quadest.errors.ConfigError` naming the key of
             the first value out of range (the schema already checks types and keys).
         uses_quadrotor_groups: the data flies the shared quadrotor, so the ``sensor`` and
             ``scenario`` groups are checked too.
@@ -45,14 +50,14 @@ class ModelSpec:
 
     name: str
     schema: type
-    build: Callable[[Any], MonteCarloData]
-    state_dimension: Callable[[Any], int]
-    validate: Callable[[Any], None] = _no_checks
+    build: Callable[[DataSettings], MonteCarloData]
+    state_dimension: Callable[[DataSettings], int]
+    validate: Callable[[DataSettings], None] = _no_checks
     uses_quadrotor_groups: bool = False
     pcrlb_is_bound: bool = False
 
 
-def spec_problems(spec: Any) -> list[str]:
+def spec_problems(spec: object) -> list[str]:
     """What keeps ``spec`` from being a usable model option (empty when it is one)."""
     if not isinstance(spec, ModelSpec):
         return [f"{spec!r} is not a quadest.simulation.spec.ModelSpec"]

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from quadest.config.settings import DataSettings
 from quadest.models.schemas import UPFBenchmarkModelConf
 from quadest.models.upf_benchmark import UPFBenchmarkModel, validate_upf_benchmark
 from quadest.montecarlo import MonteCarloData
@@ -16,15 +17,15 @@ from quadest.simulation.spec import ModelSpec
 from quadest.simulation.validation_data import simulation_labels
 
 
-def build_upf_benchmark_data(cfg) -> MonteCarloData:
+def build_upf_benchmark_data(settings: DataSettings) -> MonteCarloData:
     """Truth and measurements of ``model=upf_benchmark``: every run starts at ``x0`` (known
     exactly); the Gamma increments come from the ``process`` stream, the measurement noise from
     the ``measurement`` stream of each run; every filter starts from (x0, P0)."""
-    runs, seed, K = int(cfg.runs), int(cfg.seed), sample_count(cfg.duration, cfg.sample_period)
-    m = cfg.model
+    runs, seed, K = int(settings.runs), int(settings.seed), sample_count(settings.duration, settings.sample_period)
+    m = settings.model
     model = UPFBenchmarkModel(
         float(m.Q), float(m.R), float(m.gamma_shape), float(m.gamma_rate), float(m.switch_time),
-        float(cfg.sample_period), runs,
+        float(settings.sample_period), runs,
     )  # fmt: skip
     streams = run_streams(seed, runs)
     inputs = np.broadcast_to(np.arange(1.0, K + 2.0)[None, :, None], (runs, K + 1, 1)).copy()
@@ -35,14 +36,14 @@ def build_upf_benchmark_data(cfg) -> MonteCarloData:
     for k in range(1, K + 1):
         x[:, k] = model.f(x[:, k - 1][:, None], inputs[:, k - 1])[:, 0] + v[:, k]
     z = np.concatenate([model.h(x[:, k][:, None], inputs[:, k]) for k in range(K + 1)], axis=1) + n
-    labels = simulation_labels(cfg)
+    labels = simulation_labels(settings)
     return MonteCarloData(
-        model, np.arange(K + 1) * float(cfg.sample_period), x, np.zeros((runs, K + 1, 0)), inputs, z,
+        model, np.arange(K + 1) * float(settings.sample_period), x, np.zeros((runs, K + 1, 0)), inputs, z,
         np.full((runs, 1), float(m.x0)), np.array([[float(m.P0)]]), np.zeros((runs, 0)),
         run_seed_sequences(seed, runs)["estimator"], labels,
     )  # fmt: skip
 
 
 MODEL = ModelSpec(  # the truth's process noise is Gamma, not the Gaussian the recursion assumes: no bound
-    "upf_benchmark", UPFBenchmarkModelConf, build_upf_benchmark_data, lambda cfg: 1, validate_upf_benchmark
+    "upf_benchmark", UPFBenchmarkModelConf, build_upf_benchmark_data, lambda _: 1, validate_upf_benchmark
 )

@@ -6,10 +6,9 @@ run from the ``process`` and ``measurement`` streams.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
+from quadest.config.settings import DataSettings
 from quadest.models.base import FilterModel
 from quadest.models.config_checks import validate_linear, validate_ungm
 from quadest.models.schemas import LinearModelConf, UNGMModelConf
@@ -35,12 +34,12 @@ def _simulate(model: FilterModel, x0: np.ndarray, inputs: np.ndarray, streams) -
     return x, z
 
 
-def simulation_labels(cfg) -> dict:
+def simulation_labels(settings: DataSettings) -> dict:
     """The metrics-table labels of a model whose data is not a quadrotor flight (no sensor,
     scenario or encoder: those columns stay empty)."""
     return {
-        "model": cfg.model.name,
-        "formulation": cfg.model.name,
+        "model": settings.model.name,
+        "formulation": settings.model.name,
         "calibrated": True,
         "sensor": "",
         "error_scale": np.nan,
@@ -50,7 +49,12 @@ def simulation_labels(cfg) -> dict:
 
 
 def data_from_filter_model(
-    cfg: Any, model: FilterModel, x0_true: np.ndarray, x0_est: np.ndarray, P0: np.ndarray, inputs: np.ndarray
+    settings: DataSettings,
+    model: FilterModel,
+    x0_true: np.ndarray,
+    x0_est: np.ndarray,
+    P0: np.ndarray,
+    inputs: np.ndarray,
 ) -> MonteCarloData:
     """The Monte Carlo data of a model whose truth *is* its filter model (the validation models, a
     plugin's small model, docs/models.md): ``x_k = f(x_{k−1}, u_{k−1}) + w_k``,
@@ -59,49 +63,49 @@ def data_from_filter_model(
     PCRLB of ``model`` is a true bound.
 
     Args:
-        cfg: the job config (``runs``, ``seed``, ``sample_period``; labels from ``model.name``).
-        model: the filter model bound to ``cfg.runs`` runs (``Q`` (n, n), ``R`` (m, m)).
+        settings: the job config (``runs``, ``seed``, ``sample_period``; labels from ``model.name``).
+        model: the filter model bound to ``settings.runs`` runs (``Q`` (n, n), ``R`` (m, m)).
         x0_true: (B, n) true initial states.
         x0_est: (B, n) the filters' initial estimates.
         P0: (n, n) the filters' initial covariance.
         inputs: (B, K+1, nu) the input at every sample (``nu`` may be 0).
     """
-    runs, seed = int(cfg.runs), int(cfg.seed)
+    runs, seed = int(settings.runs), int(settings.seed)
     streams = run_streams(seed, runs)
     x, z = _simulate(model, x0_true, inputs, streams)
     K1 = inputs.shape[1]
-    time = np.arange(K1) * float(cfg.sample_period)
+    time = np.arange(K1) * float(settings.sample_period)
     empty = np.zeros((runs, K1, 0))
-    labels = simulation_labels(cfg)
+    labels = simulation_labels(settings)
     estimator_seeds = run_seed_sequences(seed, runs)["estimator"]
     return MonteCarloData(model, time, x, empty, inputs, z, x0_est, P0, np.zeros((runs, 0)), estimator_seeds, labels)
 
 
-def build_linear_data(cfg) -> MonteCarloData:
+def build_linear_data(settings: DataSettings) -> MonteCarloData:
     """Monte Carlo data of ``model=linear``: the truth starts at ``initial_state``, each run's
     initial estimate is drawn from N(truth, P0)."""
-    runs, K = int(cfg.runs), sample_count(cfg.duration, cfg.sample_period)
-    model = constant_velocity_model(cfg, runs)
-    std = np.array(list(cfg.model.initial_std))
-    P0 = initial_covariance(std, float(cfg.model.initial_correlation))
-    x0 = np.broadcast_to(np.array(list(cfg.model.initial_state), dtype=float), (runs, 4))
-    est = draw_initial_estimates(x0, P0, run_streams(int(cfg.seed), runs)["initial"])
-    return data_from_filter_model(cfg, model, x0, est, P0, np.zeros((runs, K + 1, 0)))
+    runs, K = int(settings.runs), sample_count(settings.duration, settings.sample_period)
+    model = constant_velocity_model(settings, runs)
+    std = np.array(list(settings.model.initial_std))
+    P0 = initial_covariance(std, float(settings.model.initial_correlation))
+    x0 = np.broadcast_to(np.array(list(settings.model.initial_state), dtype=float), (runs, 4))
+    est = draw_initial_estimates(x0, P0, run_streams(int(settings.seed), runs)["initial"])
+    return data_from_filter_model(settings, model, x0, est, P0, np.zeros((runs, K + 1, 0)))
 
 
-def build_ungm_data(cfg) -> MonteCarloData:
+def build_ungm_data(settings: DataSettings) -> MonteCarloData:
     """Monte Carlo data of ``model=ungm``: the truth starts from N(x0_mean, x0_var) (deterministic
     when ``x0_var`` is 0), every filter from (m0, P0)."""
-    runs, K = int(cfg.runs), sample_count(cfg.duration, cfg.sample_period)
-    m = cfg.model
-    model = UNGMModel(float(m.Q), float(m.R), float(cfg.sample_period), runs)
+    runs, K = int(settings.runs), sample_count(settings.duration, settings.sample_period)
+    m = settings.model
+    model = UNGMModel(float(m.Q), float(m.R), float(settings.sample_period), runs)
     x0 = float(m.x0_mean) + np.sqrt(float(m.x0_var)) * np.array(
-        [rng.standard_normal(1) for rng in run_streams(int(cfg.seed), runs)["start"]]
+        [rng.standard_normal(1) for rng in run_streams(int(settings.seed), runs)["start"]]
     )
     inputs = np.broadcast_to(np.arange(K + 1, dtype=float)[None, :, None], (runs, K + 1, 1)).copy()
     est = np.full((runs, 1), float(m.m0))
-    return data_from_filter_model(cfg, model, x0, est, np.array([[float(m.P0)]]), inputs)
+    return data_from_filter_model(settings, model, x0, est, np.array([[float(m.P0)]]), inputs)
 
 
-LINEAR = ModelSpec("linear", LinearModelConf, build_linear_data, lambda cfg: 4, validate_linear, pcrlb_is_bound=True)
-UNGM = ModelSpec("ungm", UNGMModelConf, build_ungm_data, lambda cfg: 1, validate_ungm, pcrlb_is_bound=True)
+LINEAR = ModelSpec("linear", LinearModelConf, build_linear_data, lambda _: 4, validate_linear, pcrlb_is_bound=True)
+UNGM = ModelSpec("ungm", UNGMModelConf, build_ungm_data, lambda _: 1, validate_ungm, pcrlb_is_bound=True)

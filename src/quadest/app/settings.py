@@ -1,0 +1,117 @@
+"""The composed config, converted once into the typed settings the layers below take.
+
+Hydra composes a :class:`~omegaconf.DictConfig` whose nodes carry their schemas
+(:mod:`quadest.app.schema`). The application layer validates it (:func:`quadest.app.validate.validate`)
+and converts it here, once per job, into :class:`JobSettings`:
+
+- :attr:`JobSettings.experiment`: the root :class:`~quadest.app.schema.ExperimentConf`, every node
+  an instance of its schema dataclass (``OmegaConf.to_object``), the estimators' nodes as resolved
+  plain dicts (label → node; an estimator takes its own node, :mod:`quadest.estimators.registry`);
+- :attr:`JobSettings.data`: the :class:`~quadest.config.settings.DataSettings` the data builders,
+  the closed loop and the replay read, with the settings of every further sensor of
+  ``model.aiding`` made here (the one conversion of a sensor node into its ``Settings``).
+
+Each layer is handed its own part: a data builder the :class:`DataSettings`, the result cache the
+:class:`~quadest.app.schema.CacheConf` and the data key (:func:`data_key`, computed here from the
+resolved config, as before), the tuning objective its :class:`~quadest.app.schema.ObjectiveConf`.
+No module below this layer imports OmegaConf or reads raw config keys (docs/layout.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from omegaconf import DictConfig, ListConfig, OmegaConf
+
+from quadest.app.schema import ExperimentConf, SensorConf
+from quadest.cache.keys import resolved_data_key
+from quadest.config.settings import DataSettings
+from quadest.sensors.base import Sensor
+from quadest.sensors.registry import discover as discover_sensors
+
+
+@dataclass
+class JobSettings:
+    """One job's config, typed (module docstring)."""
+
+    experiment: ExperimentConf
+    data: DataSettings
+
+
+def job_settings(cfg: DictConfig) -> JobSettings:
+    """The typed settings of the composed config ``cfg`` (checked for unknown keys and an unknown
+    or broken model already: :func:`quadest.app.validate.validate`)."""
+    experiment = experiment_settings(cfg)
+    return JobSettings(experiment, _data_settings(experiment, aiding_settings(cfg)))
+
+
+def data_settings(cfg: DictConfig) -> DataSettings:
+    """The :class:`DataSettings` of ``cfg`` alone (what a data builder takes; the tests' way in)."""
+    return job_settings(cfg).data
+
+
+def experiment_settings(cfg: DictConfig) -> ExperimentConf:
+    """The root of ``cfg`` as an :class:`ExperimentConf`: each node converted with
+    ``OmegaConf.to_object`` (interpolations resolved; a node with a schema becomes an instance of
+    it), ``estimator`` as label → resolved plain dict. A key the config lacks keeps its default."""
+    values: dict[str, Any] = {}
+    for f in dataclasses.fields(ExperimentConf):
+        if f.name not in cfg:
+            continue
+        if f.name == "estimator":
+            values[f.name] = {
+                str(label): OmegaConf.to_container(node, resolve=True) for label, node in cfg.estimator.items()
+            }
+            continue
+        value = cfg[f.name]
+        values[f.name] = OmegaConf.to_object(value) if isinstance(value, DictConfig | ListConfig) else value
+    return ExperimentConf(**values)
+
+
+def _data_settings(experiment: ExperimentConf, aiding: dict[str, Any]) -> DataSettings:
+    sensor = experiment.sensor
+    if dataclasses.is_dataclass(sensor) and type(sensor) is not SensorConf:
+        # the schema with plugin sensors' fields (schema.sensor_schema) is made at run time and does
+        # not pickle into worker processes; those sensors' settings are in ``aiding``
+        sensor = SensorConf(**{f.name: getattr(sensor, f.name) for f in dataclasses.fields(SensorConf)})
+    return DataSettings(
+        runs=experiment.runs,
+        seed=experiment.seed,
+        duration=experiment.duration,
+        sample_period=experiment.sample_period,
+        model=experiment.model,
+        sensor=sensor,
+        scenario=experiment.scenario,
+        loop=experiment.loop,
+        closed_loop=experiment.closed_loop,
+        source=experiment.source,
+        aiding=aiding,
+    )
+
+
+def aiding_settings(cfg: DictConfig) -> dict[str, Any]:
+    """Each registered sensor of ``cfg.model.aiding`` → an instance of its ``Settings`` from its
+    settings node (``sensor.<name>`` or its ``settings_key``; ``None`` if the config has none).
+    An unknown or broken sensor is left out: :func:`quadest.simulation.aiding.validate_aiding` names it."""
+    sensors = discover_sensors()[0]
+    names = list(cfg.model.get("aiding") or []) if isinstance(cfg.model, DictConfig) else []
+    return {name: sensor_settings(cfg, sensors[name]) for name in names if name in sensors}
+
+
+def sensor_settings(cfg: DictConfig, cls: type[Sensor]) -> Any:
+    """The instance of ``cls.Settings`` at ``cls.key()`` in ``cfg`` (``None`` if there is no such
+    node)."""
+    node = OmegaConf.select(cfg, cls.key())
+    if not isinstance(node, DictConfig):
+        return None
+    if OmegaConf.get_type(node) is not cls.Settings:
+        node = OmegaConf.merge(OmegaConf.structured(cls.Settings), node)
+    return OmegaConf.to_object(node)
+
+
+def data_key(cfg: DictConfig) -> str:
+    """Key of the Monte Carlo data of job config ``cfg`` (:func:`quadest.cache.keys.resolved_data_key`
+    of the resolved config: the same key for the same config as ever)."""
+    return resolved_data_key(OmegaConf.to_container(cfg, resolve=True))
