@@ -164,7 +164,7 @@ def plot_replay(data: MonteCarloData, angles: dict[str, np.ndarray], reference: 
     fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
     for j, ax in enumerate(axes):
         for name, a in angles.items():
-            ax.plot(t, (a[:, j] - reference[:, j] + 180.0) % 360.0 - 180.0, lw=1.0, label=name)
+            ax.plot(t, wrap_deg(a[:, j] - reference[:, j]), lw=1.0, label=name)
         ax.axvspan(t[0], t[0] + warmup, color="0.85", zorder=0)
         ax.set_ylabel(f"{ANGLES[j]} diff. [deg]")
     axes[0].legend(fontsize=8, ncol=len(angles), loc="upper right")
