@@ -80,6 +80,22 @@ def test_the_data_follow_the_pendulum_equations(registered):
         np.testing.assert_allclose(data.measurements[i], np.sin(x[:, :1]) + v, rtol=1e-12, atol=1e-12)
 
 
+def test_the_data_key_covers_a_model_plugins_source(registered, monkeypatch):
+    """quadest's code version does not cover a plugin model: the digest of its package's source is
+    in the data key, and a plugin without readable source leaves the job uncached."""
+    from quadest.app.settings import data_key, plugin_digests
+    from quadest.cache import keys
+
+    cfg = pendulum_config(registered["pendulum"])
+    assert plugin_digests(cfg) == {"model": keys.module_digest("pendulum_model")}
+    assert len(plugin_digests(cfg)["model"]) == 64
+    before = data_key(cfg)
+    monkeypatch.setattr(keys, "_module_source_digest", lambda top: "edited")
+    assert data_key(cfg) not in (before, None)
+    monkeypatch.setattr(keys, "_module_source_digest", lambda top: None)
+    assert data_key(cfg) is None
+
+
 def test_no_filter_beats_the_pendulum_bound(registered):
     """The PCRLB is a bound here (the truth is the filter model): the EKF's and the SR-UKF's pooled
     MSE over 100 runs of 4 s is not below it beyond Monte Carlo error (``floor − t·SE``, t the

@@ -110,6 +110,28 @@ def test_a_sensor_draws_the_same_numbers_from_a_plugin_or_from_the_repository(re
     np.testing.assert_array_equal(_ins("[rangefinder]").sensors["rangefinder"].values, plugin)
 
 
+def test_the_data_key_covers_a_sensor_plugins_source(registered, monkeypatch):
+    """quadest's code version does not cover a plugin sensor: the digest of its package's source
+    is in the data key (an edit is a miss, :func:`quadest.cache.keys.module_digest` reads the files),
+    the built-in sensors add nothing, and a plugin without readable source leaves the job uncached."""
+    from omegaconf import OmegaConf
+
+    from quadest.app.settings import data_key, plugin_digests
+    from quadest.cache import keys
+
+    cfg = compose_config(["model=ins", "model.aiding=[gps,rangefinder]", "estimator=[mekf]"])
+    digests = plugin_digests(cfg)
+    assert digests == {"model": "", "sensor.gps": "", "sensor.rangefinder": keys.module_digest("rangefinder_sensor")}
+    assert len(digests["sensor.rangefinder"]) == 64
+    without = compose_config(["model=ins", "model.aiding=[gps]", "estimator=[mekf]"])
+    assert data_key(without) == keys.resolved_data_key(OmegaConf.to_container(without, resolve=True))
+    before = data_key(cfg)
+    monkeypatch.setattr(keys, "_module_source_digest", lambda top: "edited" if top == "rangefinder_sensor" else None)
+    assert data_key(cfg) not in (before, None)
+    monkeypatch.setattr(keys, "_module_source_digest", lambda top: None)
+    assert data_key(cfg) is None
+
+
 def test_the_rangefinder_jacobian_matches_finite_differences_on_the_ins(registered):
     data = _ins("[rangefinder]")
     model, x, u = data.model, data.truth[:, 50], data.inputs[:, 50]

@@ -610,6 +610,16 @@ MUTATIONS = (
         "return {}",
         ("tests/test_sensor_plugins.py::test_a_velocity_sensor_on_the_quadrotor_informs_the_filter",),
     ),
+    Mutation(
+        "the data key ignores the model and sensor plugins' source (a stale hit after an edit)",
+        "src/quadest/cache/keys.py",
+        '        material["plugins"] = dict(plugins)',
+        "        pass",
+        (
+            "tests/test_model_plugins.py::test_the_data_key_covers_a_model_plugins_source",
+            "tests/test_sensor_plugins.py::test_the_data_key_covers_a_sensor_plugins_source",
+        ),
+    ),
 )  # fmt: skip
 
 

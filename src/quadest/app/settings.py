@@ -26,10 +26,11 @@ from typing import Any
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from quadest.app.schema import ExperimentConf, SensorConf
-from quadest.cache.keys import resolved_data_key
+from quadest.cache.keys import module_digest, plugin_digest, resolved_data_key
 from quadest.config.settings import DataSettings
 from quadest.sensors.base import Sensor
 from quadest.sensors.registry import discover as discover_sensors
+from quadest.simulation.registry import model_spec
 
 
 @dataclass
@@ -111,7 +112,26 @@ def sensor_settings(cfg: DictConfig, cls: type[Sensor]) -> Any:
     return OmegaConf.to_object(node)
 
 
-def data_key(cfg: DictConfig) -> str:
+def data_key(cfg: DictConfig) -> str | None:
     """Key of the Monte Carlo data of job config ``cfg`` (:func:`quadest.cache.keys.resolved_data_key`
-    of the resolved config: the same key for the same config as ever)."""
-    return resolved_data_key(OmegaConf.to_container(cfg, resolve=True))
+    of the resolved config and of the source of the model and sensor plugins it uses); ``None``, so
+    that the job is not cached, when a plugin's source cannot be read."""
+    plugins = plugin_digests(cfg)
+    if any(digest is None for digest in plugins.values()):
+        return None
+    return resolved_data_key(OmegaConf.to_container(cfg, resolve=True), {k: v for k, v in plugins.items() if v})
+
+
+def plugin_digests(cfg: DictConfig) -> dict[str, str | None]:
+    """:func:`quadest.cache.keys.module_digest` of the code of the model (``"model"``: the modules of
+    its spec's ``build`` and ``schema``) and of each sensor of ``model.aiding``
+    (``"sensor.<name>"``): ``""`` for the package's own."""
+    spec = model_spec(cfg.model.name)
+    modules = {getattr(spec.build, "__module__", None) or spec.schema.__module__, spec.schema.__module__}
+    digests = {module_digest(m) for m in modules}
+    found: dict[str, str | None] = {"model": None if None in digests else "".join(sorted(digests))}
+    sensors = discover_sensors()[0]
+    for name in list(cfg.model.get("aiding") or []) if isinstance(cfg.model, DictConfig) else []:
+        if name in sensors:
+            found[f"sensor.{name}"] = plugin_digest(sensors[name])
+    return found

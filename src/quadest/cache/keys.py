@@ -11,8 +11,10 @@ three places:
   outside the quadest package, the digest of that class's top-level package or module source
   (:func:`plugin_digest`; a class whose source cannot be found is never cached);
 - the **data key**: every other leaf (a new key too: an unknown key costs a cache miss, never a
-  wrong hit), plus :func:`code_version` and the backend of the compiled numerics
-  (``QUADEST_KERNELS``, an environment setting).
+  wrong hit), plus :func:`code_version`, the backend of the compiled numerics
+  (``QUADEST_KERNELS``, an environment setting) and, for a model or sensor from outside the quadest
+  package, the digest of its package's source (:func:`module_digest`; a plugin whose source cannot
+  be found makes the job uncached).
 
 ``tests/test_cache_keys_property.py`` checks this for every leaf of every config group option.
 """
@@ -123,15 +125,19 @@ def _module_source_digest(top_level: str) -> str | None:
     return source_digest([Path(file)], Path(file).parent)
 
 
-def plugin_digest(cls: type) -> str | None:
-    """What identifies the code of estimator class ``cls`` beyond :func:`code_version`: ``""`` for
-    a class of the quadest package; for a plugin, the digest of the source of the top-level package
-    (or single module) that defines it; ``None`` if that source cannot be read, and then the
-    estimator is never cached. Code the plugin imports from other packages is not covered."""
-    module = cls.__module__
+def module_digest(module: str) -> str | None:
+    """What identifies the code of module ``module`` beyond :func:`code_version`: ``""`` for a
+    module of the quadest package; for a plugin's module, the digest of the source of its top-level
+    package (or single module); ``None`` if that source cannot be read, and then what it computes is
+    never cached. Code the plugin imports from other packages is not covered."""
     if module == "quadest" or module.startswith("quadest."):
         return ""
     return _module_source_digest(module.split(".")[0])
+
+
+def plugin_digest(cls: type) -> str | None:
+    """:func:`module_digest` of the module that defines estimator (or sensor) class ``cls``."""
+    return module_digest(cls.__module__)
 
 
 def without_paths(tree: dict[str, Any], paths: Iterable[str]) -> dict[str, Any]:
@@ -158,23 +164,29 @@ def data_material(resolved: dict[str, Any]) -> dict[str, Any]:
     return material
 
 
-def resolved_data_key(resolved: dict[str, Any]) -> str:
+def resolved_data_key(resolved: dict[str, Any], plugins: Mapping[str, str] | None = None) -> str:
     """Key of the Monte Carlo data of the resolved job config ``resolved`` (a plain dict).
+
+    ``plugins`` maps each model or sensor plugin the data is made with (``"model"``,
+    ``"sensor.<name>"``) to its :func:`module_digest`: an edit to a plugin's source is a miss. The
+    package's own models and sensors are in :func:`code_version` and are left out of it, so a job
+    without plugins keeps its key.
 
     It also holds the backend of the compiled numerics (``QUADEST_KERNELS``, numba or numpy:
     :func:`quadest.numerics.square_root.kernel_backend`), an environment setting read at every
     call: the square-root kernels, which every estimator's NEES and NIS go through, and the
     quadrotor model's compiled ``f``/``h`` agree with their numpy references only to round-off,
     and their step times differ. Through the data key it reaches every estimator key."""
-    return digest_text(
-        {
-            "format": FORMAT,
-            "kind": "data",
-            "code": code_version(),
-            "kernels": kernel_backend(),
-            "config": data_material(resolved),
-        }
-    )
+    material = {
+        "format": FORMAT,
+        "kind": "data",
+        "code": code_version(),
+        "kernels": kernel_backend(),
+        "config": data_material(resolved),
+    }
+    if plugins:
+        material["plugins"] = dict(plugins)
+    return digest_text(material)
 
 
 def estimator_key(
