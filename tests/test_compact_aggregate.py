@@ -45,7 +45,7 @@ hydra:
       sweep.alpha: 1e-3,1.0
       sweep.beta: 0.0,2.0
   callbacks:
-    aggregate: {_target_: quadest.aggregate.callback.AggregateCallback, output: compact}
+    aggregate: {_target_: quadest.app.callbacks.AggregateCallback, output: compact}
 """
 SWEPT = ["sensor.error_scale", "sweep.alpha", "sweep.beta"]
 

@@ -133,6 +133,7 @@ def test_import_contracts_are_kept(tmp_path):
         ("evaluation/upward.py", "from quadest.runner import run_estimator\n", "results-without-runner"),
         ("estimators/upward.py", "from quadest.montecarlo import MonteCarloData\n", "estimators-see-the-model-only"),
         ("sensors/upward.py", "from omegaconf import OmegaConf\n", "hydra-in-app-only"),
+        ("aggregate/upward.py", "from hydra.experimental.callback import Callback\n", "hydra-in-app-only"),
     ],
 )
 def test_a_forbidden_import_breaks_its_contract(tmp_path, module, text, contract):

@@ -35,7 +35,7 @@ hydra:
     params:
       sweep.alpha: 0.5,1.0
   callbacks:
-    aggregate: {_target_: quadest.aggregate.callback.AggregateCallback}
+    aggregate: {_target_: quadest.app.callbacks.AggregateCallback}
 """
 
 

@@ -207,7 +207,7 @@ def test_the_particle_count_callback_tabulates_the_run_and_a_sweep_over_q(tmp_pa
     two or more Q) and leaves another multirun alone."""
     from omegaconf import OmegaConf
 
-    from quadest.aggregate.callback import ParticleCountCallback
+    from quadest.app.callbacks import ParticleCountCallback
 
     ekpf = [1.0, 2.0, 1.5]
     job = tmp_path / "job"

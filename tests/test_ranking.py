@@ -94,7 +94,7 @@ def test_the_ranking_callback_tabulates_the_run_and_the_sweep_when_they_end(tmp_
     from hydra.core.global_hydra import GlobalHydra
     from omegaconf import OmegaConf
 
-    from quadest.aggregate.callback import RankingCallback
+    from quadest.app.callbacks import RankingCallback
     from quadest.app.schema import register_schemas
     from quadest.config.paths import config_dir
 
@@ -104,7 +104,7 @@ def test_the_ranking_callback_tabulates_the_run_and_the_sweep_when_they_end(tmp_
         cfg = compose(config_name="config", overrides=["experiment=seed004_landing"], return_hydra_config=True)
     GlobalHydra.instance().clear()
     callbacks = cfg.hydra.callbacks
-    assert callbacks.ranking._target_ == "quadest.aggregate.callback.RankingCallback"
+    assert callbacks.ranking._target_ == "quadest.app.callbacks.RankingCallback"
     job = tmp_path / "job"
     job.mkdir()
     _metrics().to_csv(job / "metrics.csv", index=False)

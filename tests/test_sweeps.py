@@ -60,7 +60,7 @@ hydra:
       sweep.alpha: 0.5,1.0
       sweep.beta: 0.0,2.0
   callbacks:
-    aggregate: {_target_: quadest.aggregate.callback.AggregateCallback}
+    aggregate: {_target_: quadest.app.callbacks.AggregateCallback}
 """
 
 

@@ -1,7 +1,7 @@
 """Aggregate a sweep folder into tables, figures and a report: ``quadest-aggregate SWEEP_DIR``.
 
 Also run automatically at the end of a multirun by
-:class:`~quadest.aggregate.callback.AggregateCallback`. It reads what each job documented
+:class:`~quadest.app.callbacks.AggregateCallback`. It reads what each job documented
 (``summary.json``, ``rmse_summary.csv``, ``.hydra/overrides.yaml``) and never needs a job to have
 succeeded: failed jobs (``"status": "failed"``), jobs that never finished (no ``summary.json``)
 and jobs that are missing from the grid are listed, and the rest is aggregated. It can be re-run
@@ -29,6 +29,6 @@ One module per job: :mod:`~quadest.aggregate.sweep` reads the folder,
 :mod:`~quadest.aggregate.figures` draws, :mod:`~quadest.aggregate.versus_best` compares each cell
 with the best, :mod:`~quadest.aggregate.compact` writes the compact aggregate,
 :mod:`~quadest.aggregate.report` writes everything,
-:mod:`~quadest.aggregate.callback` and :mod:`~quadest.aggregate.cli` are the two ways in. The
+:class:`~quadest.app.callbacks.AggregateCallback` and :mod:`~quadest.aggregate.cli` are the two ways in. The
 Markdown and LaTeX rendering is shared with the job (:mod:`quadest.evaluation.formatting`).
 """

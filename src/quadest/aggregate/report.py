@@ -19,7 +19,7 @@ from quadest.evaluation.formatting import latex_table, markdown_table, strict_js
 
 OUTPUT_KEY = "hydra.callbacks.aggregate.output"
 """The key that chooses the aggregate's output (an argument of
-:class:`~quadest.aggregate.callback.AggregateCallback`, recorded in the sweep's ``multirun.yaml``)."""
+:class:`~quadest.app.callbacks.AggregateCallback`, recorded in the sweep's ``multirun.yaml``)."""
 OUTPUTS = ("full", "compact")
 
 

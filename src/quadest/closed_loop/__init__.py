@@ -7,7 +7,8 @@
 - :mod:`~quadest.closed_loop.seed003`: seed 003's arms (EKF in / EKF out) with its 5-state filter;
 - :mod:`~quadest.closed_loop.seed003_report`: seed 003's paired table;
 - :mod:`~quadest.closed_loop.control_tables`: a job's control tables and their ``summary.json`` entry;
-- :mod:`~quadest.closed_loop.report`: the sweep callback that tabulates the loop modes side by side.
+- :mod:`~quadest.closed_loop.report`: the loop modes of a sweep side by side (after a sweep, by the
+  callback :class:`quadest.app.callbacks.ClosedLoopReport`).
 
 A job with ``loop`` other than ``open`` is the closed-loop kind of the one job pipeline
 (:mod:`quadest.app.closed_loop_job`). Its settings (the ``loop`` key, the state sensor and the

@@ -1,6 +1,6 @@
 """The loop modes of a sweep side by side: one control table with 95 % confidence intervals and the
 roll and pitch tracking figure (``hydra.callbacks`` in an experiment file: ``_target_:
-quadest.closed_loop.report.ClosedLoopReport``), written to ``<sweep>/closed_loop/``."""
+quadest.app.callbacks.ClosedLoopReport``), written to ``<sweep>/closed_loop/``."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import yaml
-from hydra.experimental.callback import Callback
 
 from quadest.closed_loop.control_metrics import step_events, summarize_control
 from quadest.closed_loop.figures import plot_tracking
@@ -74,10 +73,3 @@ def control_report(sweep_dir: Path) -> Path:
         plot_tracking(time, reference, responses, events, out / "tracking.png",
                       "Roll and pitch tracking, run 0: estimator in the loop vs noisy-state feedback")  # fmt: skip
     return out / "control_table.md"
-
-
-class ClosedLoopReport(Callback):
-    """Hydra callback: tabulate the loop modes of the sweep when the multirun ends."""
-
-    def on_multirun_end(self, config, **kwargs) -> None:
-        print(f"Closed-loop report: {control_report(Path(config.hydra.sweep.dir))}")

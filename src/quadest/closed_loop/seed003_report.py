@@ -5,7 +5,7 @@ and ``estimate`` (EKF in) from the same seed, so run i of every arm flies on the
 (common random numbers). Per metric and step this module reports each arm's mean with its 95 %
 Student-t CI over the runs, and the paired difference EKF in − EKF out (mean and 95 % Student-t CI
 of the per-run differences, over the runs with a value in both arms), beside seed 003's printed
-numbers (its §4 and Fig. 1). ``hydra.callbacks`` target: :class:`Seed003Report`; outputs in
+numbers (its §4 and Fig. 1). ``hydra.callbacks`` target: :class:`quadest.app.callbacks.Seed003Report`; outputs in
 ``<sweep>/seed003/``: ``seed003_table.csv`` (``ci_low``/``ci_high`` columns), ``seed003_table.md``,
 ``model_error.csv`` (the one-step model error of the filter along run 0 of each arm, what Q
 stands for) and ``tracking.png``. Beside the control metrics the table holds the EKF's per-run
@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import yaml
-from hydra.experimental.callback import Callback
 
 from quadest.closed_loop.control_metrics import mean_ci, step_events
 from quadest.closed_loop.figures import plot_tracking
@@ -146,10 +145,3 @@ def _figures(jobs: list[Path], record: dict, out: Path) -> None:
         plot_tracking(time, reference, responses, events, out / "tracking.png",
                       "Seed 003 on the quadrotor, run 0: EKF in vs EKF out (noisy states fed)")  # fmt: skip
         pd.DataFrame(errors).to_csv(out / "model_error.csv", index=False)
-
-
-class Seed003Report(Callback):
-    """Hydra callback: seed 003's paired table when the multirun ends."""
-
-    def on_multirun_end(self, config, **kwargs) -> None:
-        print(f"Seed 003 report: {seed003_report(Path(config.hydra.sweep.dir))}")
