@@ -311,6 +311,26 @@ def test_magnetometer_samples_the_body_field_at_its_rate():
         sample_stride(30.0, T)
 
 
+@pytest.mark.parametrize("model", ["attitude", "ins"])
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [
+        ("model.magnetometer.rate=30", "model.magnetometer.rate"),
+        ("model.magnetometer.white_noise=0", "model.magnetometer.white_noise"),
+        ("model.magnetometer.earth_field=[0,0,0]", "model.magnetometer.earth_field"),
+        ("model.magnetometer.bias=-1", "model.magnetometer.bias"),
+    ],
+)
+def test_both_models_refuse_a_bad_magnetometer_naming_the_key(model, override, key):
+    """One magnetometer (:class:`quadest.sensors.magnetometer.Magnetometer`) for ``model=attitude``
+    and ``model=ins``: the same settings are refused by both before any work, with one line."""
+    from quadest.app.validate import validate
+
+    with pytest.raises(ConfigError) as info:
+        validate(compose_config([f"model={model}", "estimator=[mekf]", override]))
+    assert info.value.key == key and "\n" not in str(info.value)
+
+
 # --- the filterpy baselines in error coordinates ---
 
 

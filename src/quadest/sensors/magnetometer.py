@@ -18,10 +18,11 @@ draw. Samples exist every ``round(1/(rate·T))`` filter steps (``rate`` must div
 rate); the others are NaN and marked unavailable in the :class:`SensorRecord`. Units are those of
 ``m_e`` (µT in the shipped configs).
 
-:class:`Magnetometer` is the sensor of ``model=ins`` (``model.aiding: [magnetometer, ...]``,
-settings ``model.magnetometer``, :class:`MagnetometerConf`), :class:`MagnetometerAiding` the
-filters' model of it: ``h = M(R(q)ᵀ m_e)`` with each run's known soft/hard-iron errors when
-``calibrated`` (nominal, error-free ones otherwise).
+:class:`Magnetometer` is the sensor (``model.aiding: [magnetometer, ...]`` of ``model=ins``, and
+the built-in second sensor of ``model=attitude``; settings ``model.magnetometer``,
+:class:`MagnetometerConf`), :class:`MagnetometerAiding` the filters' model of it on the INS:
+``h = M(R(q)ᵀ m_e)`` with each run's known soft/hard-iron errors when ``calibrated`` (nominal,
+error-free ones otherwise).
 """
 
 from __future__ import annotations
@@ -135,9 +136,17 @@ class Magnetometer(Sensor):
             self.triad, self.errors, truth.attitude, self.mag_earth, T, rate, streams["mag_noise"]
         )
 
-    def measurement_model(self, layout: StateLayout) -> MagnetometerAiding:
+    def noise_covariance(self) -> np.ndarray:
+        """``R`` (3, 3) of the filters (class docstring)."""
         mag, T, duration = self.triad, self.context.sample_period, self.context.duration
         stride = sample_stride(float(self.settings.rate), T)
         r = mag.white_noise_std(stride * T) ** 2 + mag.bias_random_walk**2 * duration / 2.0
-        assumed = self.errors if self.context.calibrated else TriadErrors.nominal(self.errors.bias.shape[0])
-        return MagnetometerAiding(self.mag_earth, assumed, self.context.noise_inflation * r * np.eye(3), layout)
+        return self.context.noise_inflation * r * np.eye(3)
+
+    def assumed_errors(self) -> TriadErrors:
+        """The soft/hard-iron errors the filters use: each run's drawn ones when ``calibrated``,
+        nominal (error-free) ones otherwise."""
+        return self.errors if self.context.calibrated else TriadErrors.nominal(self.errors.bias.shape[0])
+
+    def measurement_model(self, layout: StateLayout) -> MagnetometerAiding:
+        return MagnetometerAiding(self.mag_earth, self.assumed_errors(), self.noise_covariance(), layout)

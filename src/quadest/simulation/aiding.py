@@ -39,15 +39,17 @@ def sensor_settings(settings: DataSettings, name: str) -> Any:
     return settings.aiding.get(name)
 
 
-def sensor_context(settings: DataSettings) -> SensorContext:
-    """The job settings the sensors read (:class:`~quadest.sensors.base.SensorContext`); a model
-    whose schema has no ``calibrated`` or ``measurement_noise_inflation`` gets ``True`` and 1."""
+def sensor_context(settings: DataSettings, calibrated: bool, noise_inflation: float) -> SensorContext:
+    """The job settings the sensors read (:class:`~quadest.sensors.base.SensorContext`): the Monte
+    Carlo settings and the MIMU's error scale from ``settings``; whether the filters know each run's
+    sensor errors and the factor on every ``R`` from the model, which passes its own keys (the
+    quadrotor's and the INS's ``model.calibrated`` and ``model.measurement_noise_inflation``)."""
     return SensorContext(
         sample_period=float(settings.sample_period),
         duration=float(settings.duration),
         error_scale=float(settings.sensor.error_scale),
-        calibrated=bool(getattr(settings.model, "calibrated", True)),
-        noise_inflation=float(getattr(settings.model, "measurement_noise_inflation", 1.0)),
+        calibrated=bool(calibrated),
+        noise_inflation=float(noise_inflation),
     )
 
 
@@ -99,13 +101,13 @@ def validate_aiding(settings: DataSettings, layout: StateLayout) -> None:
 
 
 def measure_aiding(
-    settings: DataSettings, truth: TrueMotion, streams: dict[str, list], layout: StateLayout
+    settings: DataSettings, truth: TrueMotion, streams: dict[str, list], layout: StateLayout, context: SensorContext
 ) -> tuple[dict[str, SensorRecord], dict[str, SensorModel]]:
     """The samples of every sensor of ``model.aiding`` and the filters' models of them, by
-    name in update order. ``streams`` are the runs' streams (:func:`~quadest.montecarlo.streams.run_streams`):
-    a built-in sensor draws from those it names; every other stream, all of a plugin's and a new
-    in-repository sensor's, is named after the sensor (``sensor:<name>:<stream>``)."""
-    context = sensor_context(settings)
+    name in update order, each sensor made with ``context`` (:func:`sensor_context`). ``streams``
+    are the runs' streams (:func:`~quadest.montecarlo.streams.run_streams`): a built-in sensor draws
+    from those it names; every other stream, all of a plugin's and a new in-repository sensor's, is
+    named after the sensor (``sensor:<name>:<stream>``)."""
     runs, seed = truth.position.shape[0], int(settings.seed)
     records, models = {}, {}
     for name, cls in _selected(settings).items():

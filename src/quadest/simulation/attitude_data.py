@@ -26,7 +26,6 @@ import numpy as np
 
 from quadest.config.ranges import require_non_negative, require_positive
 from quadest.config.settings import DataSettings
-from quadest.errors import ConfigError
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.config_checks import validate_quadrotor
 from quadest.models.quadrotor_config import triad_spec
@@ -35,9 +34,11 @@ from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.quadrotor.kinematics import rotation
-from quadest.sensors.magnetometer import measure_magnetometer, sample_stride
+from quadest.sensors.base import TrueMotion
+from quadest.sensors.magnetometer import Magnetometer
 from quadest.sensors.mimu import TriadErrors, TriadSpec, draw_triad_errors, measure_triad
 from quadest.sensors.noise_laws import noise_law_from_config
+from quadest.simulation.aiding import sensor_context
 from quadest.simulation.quadrotor_data import fly_scenario
 from quadest.simulation.spec import ModelSpec
 
@@ -51,10 +52,6 @@ def _measure_with_truth_bias(spec: TriadSpec, errors: TriadErrors, y: np.ndarray
     drift_only = measure_triad(quiet, errors, y, T, rngs, law)
     bias = drift_only - (errors.apply(y) - errors.bias[:, None])
     return z, bias
-
-
-def _mag_spec(mcfg, scale: float) -> TriadSpec:
-    return TriadSpec(**{k: float(getattr(mcfg.magnetometer, k)) for k in TriadSpec.__dataclass_fields__}).scaled(scale)
 
 
 def interval_average(samples: np.ndarray) -> np.ndarray:
@@ -73,15 +70,7 @@ def validate_attitude(settings: DataSettings) -> None:
     validate_quadrotor(settings)
     m = settings.model
     require_positive("model.acceleration_std", m.acceleration_std)
-    require_positive("model.magnetometer.rate", m.magnetometer.rate, "must be > 0 Hz")
-    sample_stride(float(m.magnetometer.rate), float(settings.sample_period))
-    if len(m.magnetometer.earth_field) != 3 or not any(m.magnetometer.earth_field):
-        raise ConfigError("model.magnetometer.earth_field", list(m.magnetometer.earth_field), "3 values, not all 0")
-    for key in TriadSpec.__dataclass_fields__:
-        require_non_negative(f"model.magnetometer.{key}", getattr(m.magnetometer, key))
-    require_positive(
-        "model.magnetometer.white_noise", m.magnetometer.white_noise, "must be > 0 (R_mag is built from it)"
-    )
+    Magnetometer.validate(m.magnetometer, Magnetometer.key(), float(settings.sample_period))
     require_non_negative("model.attitude_process_noise.attitude", m.attitude_process_noise.attitude)
     require_positive("model.attitude_process_noise.inflation", m.attitude_process_noise.inflation)
     for key in ("attitude", "gyro_bias", "accel_bias"):
@@ -96,14 +85,11 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     streams = run_streams(seed, runs)
     _, flown, truth = fly_scenario(settings, streams)
     g_e = np.array([0.0, 0.0, -float(mcfg.gravity)])
-    m_e = np.array(mcfg.magnetometer.earth_field, dtype=float)
 
     scale = float(scfg.error_scale)
     accel, gyro = triad_spec(scfg.accel, scale), triad_spec(scfg.gyro, scale)
-    mag = _mag_spec(mcfg, scale)
     accel_errors = draw_triad_errors(accel, streams["accel_errors"])
     gyro_errors = draw_triad_errors(gyro, streams["gyro_errors"])
-    mag_errors = draw_triad_errors(mag, streams["mag_errors"])
     accel_law = noise_law_from_config(scfg.accel.noise_law)
     gyro_law = noise_law_from_config(scfg.gyro.noise_law)
     angles = truth.state[..., 6:9]
@@ -114,8 +100,10 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
         gyro, gyro_errors, truth.state[..., 9:12], T, streams["gyro_noise"], gyro_law
     )
     x_true = AttitudeFilterModel.truth_state(angles, gyro_bias, accel_bias)
-    rate = float(mcfg.magnetometer.rate)
-    z_mag = measure_magnetometer(mag, mag_errors, x_true[..., :4], m_e, T, rate, streams["mag_noise"])
+    noise = float(mcfg.measurement_noise_inflation)
+    magnetometer = Magnetometer(mcfg.magnetometer, sensor_context(settings, mcfg.calibrated, noise))
+    motion = TrueMotion(truth.time, truth.state[..., 0:3], truth.state[..., 3:6], x_true[..., :4])
+    z_mag = magnetometer.simulate(motion, {name: streams[name] for name in Magnetometer.stream_names()})
 
     known = bool(mcfg.known_acceleration)
     a_e = np.einsum("bkij,bkj->bki", rotation(angles), truth.specific_force) + g_e if known else np.zeros_like(angles)
@@ -124,12 +112,17 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     q_att = gyro.white_noise**2 * T + float(mcfg.attitude_process_noise.attitude) ** 2
     Q = inflation * np.diag([q_att] * 3 + [gyro.bias_random_walk**2 * T] * 3 + [accel.bias_random_walk**2 * T] * 3)
     r_acc = accel.white_noise_std(T) ** 2 + (0.0 if known else float(mcfg.acceleration_std) ** 2)
-    mag_period = sample_stride(rate, T) * T
-    r_mag = mag.white_noise_std(mag_period) ** 2 + mag.bias_random_walk**2 * float(settings.duration) / 2.0
-    noise = float(mcfg.measurement_noise_inflation)
-    assumed = (gyro_errors, accel_errors, mag_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 3
+    assumed = (gyro_errors, accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
     model = AttitudeFilterModel(
-        T, g_e, m_e, Q, noise * r_acc * np.eye(3), noise * r_mag * np.eye(3), *assumed, batch_size=runs
+        T,
+        g_e,
+        magnetometer.mag_earth,
+        Q,
+        noise * r_acc * np.eye(3),
+        magnetometer.noise_covariance(),
+        *assumed,
+        magnetometer.assumed_errors(),
+        batch_size=runs,
     )
 
     s0 = mcfg.attitude_initial_std
@@ -138,7 +131,7 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
         "model": mcfg.name, "calibrated": bool(mcfg.calibrated), "known_acceleration": known,
-        "sensor": scfg.name, "error_scale": scale, "scenario": flown.name, "mag_rate": rate,
+        "sensor": scfg.name, "error_scale": scale, "scenario": flown.name, "mag_rate": float(mcfg.magnetometer.rate),
     }  # fmt: skip
     return MonteCarloData(
         model=model,

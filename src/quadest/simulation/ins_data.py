@@ -42,7 +42,7 @@ from quadest.quadrotor.scenarios import PlatformApproach
 from quadest.sensors.base import TrueMotion
 from quadest.sensors.mimu import TriadErrors, draw_triad_errors
 from quadest.sensors.noise_laws import noise_law_from_config
-from quadest.simulation.aiding import measure_aiding, validate_aiding
+from quadest.simulation.aiding import measure_aiding, sensor_context, validate_aiding
 from quadest.simulation.attitude_data import _measure_with_truth_bias
 from quadest.simulation.quadrotor_data import fly_scenario
 from quadest.simulation.spec import ModelSpec
@@ -111,7 +111,13 @@ def build_ins_data(settings: DataSettings) -> MonteCarloData:
 
     platform = flown.platform_position(truth.time) if isinstance(flown, PlatformApproach) else None
     motion = TrueMotion(truth.time, x_true[..., 4:7], x_true[..., 7:10], x_true[..., 0:4], platform)
-    records, aiding = measure_aiding(settings, motion, streams, ins_layout(platform_input=platform is not None))
+    records, aiding = measure_aiding(
+        settings,
+        motion,
+        streams,
+        ins_layout(platform_input=platform is not None),
+        sensor_context(settings, settings.model.calibrated, settings.model.measurement_noise_inflation),
+    )
     assumed = (gyro_errors, accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
     Q = process_noise(gyro, accel, mcfg.ins_process_noise, T)
     model = InsFilterModel(

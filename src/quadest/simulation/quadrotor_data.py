@@ -35,7 +35,7 @@ from quadest.sensors.base import SensorModel, TrueMotion
 from quadest.sensors.encoders import encoder_resolution, measure_rotor_speeds
 from quadest.sensors.mimu import TriadErrors, draw_triad_errors, measure_triad
 from quadest.sensors.noise_laws import noise_law_from_config
-from quadest.simulation.aiding import measure_aiding, validate_aiding
+from quadest.simulation.aiding import measure_aiding, sensor_context, validate_aiding
 from quadest.simulation.spec import ModelSpec
 
 
@@ -226,7 +226,13 @@ def build_quadrotor_data(settings: DataSettings) -> MonteCarloData:
     if motion:
         state = np.concatenate(motion)
         truth_motion = TrueMotion(time, state[..., 0:3], state[..., 3:6], quat.from_euler(state[..., 6:9]))
-        records, aiding = measure_aiding(settings, truth_motion, streams, quadrotor_layout(settings.model.formulation))
+        records, aiding = measure_aiding(
+            settings,
+            truth_motion,
+            streams,
+            quadrotor_layout(settings.model.formulation),
+            sensor_context(settings, settings.model.calibrated, settings.model.measurement_noise_inflation),
+        )
     model = quadrotor_filter_model(settings, *(_concatenate([e[i] for e in errors]) for i in (0, 1)), aiding=aiding)
     return _data(settings, streams, flown, model, time, *arrays, sensors=records)
 
