@@ -3,8 +3,8 @@ repository, in the sources, tests, configs, tools, benchmarks, examples and docs
 
 The rules, applied line by line to every text file under ``src/``, ``tests/``, ``conf/``,
 ``experiments/``, ``tools/``, ``benchmarks/``, ``examples/`` and ``docs/``, and to ``README.md``,
-``results/README.md``, ``mkdocs.yml`` and ``pyproject.toml`` (``__pycache__`` and binary files are
-skipped):
+the hand-written ``README.md`` of ``results/`` and of each results folder, ``results/manifest.yaml``,
+``mkdocs.yml`` and ``pyproject.toml`` (``__pycache__`` and binary files are skipped):
 
 1. **No reference to one of this project's issues by number.** Flagged: the word ``issue`` or
    ``issues`` followed by a number, with or without ``#`` (any case), and a bare ``#`` followed by
@@ -32,7 +32,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = ("src", "tests", "conf", "experiments", "tools", "benchmarks", "examples", "docs")
-FILES = ("README.md", "results/README.md", "mkdocs.yml", "pyproject.toml")
+FILES = ("README.md", "results/manifest.yaml", "mkdocs.yml", "pyproject.toml")
+WRITTEN_RESULTS = "results/**/README.md"  # the hand-written notes of the results folders (the rest is output)
 SKIPPED_FOLDERS = {"__pycache__", ".pytest_cache", ".ruff_cache", ".hypothesis", "site"}
 
 # Projects whose own issue trackers the code may cite by number ("<project> issue <number>").
@@ -82,7 +83,7 @@ def problems_in(line: str) -> list[str]:
 
 
 def checked_files() -> list[Path]:
-    files = [ROOT / name for name in FILES if (ROOT / name).is_file()]
+    files = [ROOT / name for name in FILES if (ROOT / name).is_file()] + sorted(ROOT.glob(WRITTEN_RESULTS))
     for folder in FOLDERS:
         for path in sorted((ROOT / folder).rglob("*")):
             if path.is_file() and not SKIPPED_FOLDERS.intersection(path.relative_to(ROOT).parts):
@@ -143,6 +144,7 @@ def test_the_rules_allow_citations_and_ordinary_text(line):
 def test_no_issue_numbers_and_no_paths_out_of_the_repository():
     files = checked_files()
     assert ROOT / "src" / "quadest" / "__init__.py" in files and ROOT / "README.md" in files
+    assert ROOT / "results" / "README.md" in files and ROOT / "results" / "ins_figure8" / "README.md" in files
     hits = []
     for path in files:
         text = text_of(path)

@@ -1,5 +1,6 @@
 """Gaussian predict and update steps, written once: pure batched functions that every Gaussian
-filter of quadest and both Gaussian particle proposals are built from.
+filter of quadest and both Gaussian particle proposals are built from (not the filterpy baselines
+``ekf`` and ``ukf``, which run filterpy's own steps: they are the independent reference).
 
 The structure is dynamax's generalized Gaussian state-space inference (``generalized_gaussian_ssm``,
 after Tronarp, García-Fernández & Särkkä 2018 and Särkkä 2013, §5–§6): a filter step needs the
