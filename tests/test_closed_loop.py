@@ -18,6 +18,7 @@ from quadest.app.job import run_job
 from quadest.app.settings import data_settings
 from quadest.closed_loop.control_metrics import StepEvent, step_events, step_response
 from quadest.closed_loop.feedback import StateSensorFeedback, estimate_to_controller_state
+from quadest.closed_loop.loops import controlled_models
 from quadest.closed_loop.quadrotor import QuadrotorLoop
 from quadest.closed_loop.report import control_report
 from quadest.config.closed_loop import validate_loop
@@ -313,7 +314,7 @@ def test_bad_loop_settings_fail_in_one_line_before_any_work(tmp_path, overrides,
     cfg = _cfg(*overrides)
     settings = data_settings(cfg)
     with pytest.raises(ConfigError) as err:
-        validate_loop(settings.loop, settings.model.name, settings.closed_loop)
+        validate_loop(settings.loop, settings.model.name, settings.closed_loop, controlled_models())
     assert err.value.key == key and allowed in str(err.value) and "\n" not in str(err.value)
     with pytest.raises(ConfigError):
         run_job(cfg, tmp_path / "out")

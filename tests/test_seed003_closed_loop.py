@@ -17,7 +17,8 @@ from quadest.app.job import run_job
 from quadest.app.settings import data_settings
 from quadest.app.validate import validate_model
 from quadest.closed_loop.control_metrics import StepEvent, step_response
-from quadest.closed_loop.seed003 import Seed003Loop, closed_loop_for, controller_state
+from quadest.closed_loop.loops import closed_loop_for, controlled_models
+from quadest.closed_loop.seed003 import Seed003Loop, controller_state
 from quadest.closed_loop.seed003_report import paired_rows, seed003_report
 from quadest.config.closed_loop import validate_loop
 from quadest.errors import ConfigError
@@ -210,7 +211,7 @@ def test_bad_seed003_settings_fail_in_one_line(override, key, allowed):
         if key.startswith("model"):
             validate_model(settings)
         else:
-            validate_loop(settings.loop, settings.model.name, settings.closed_loop)
+            validate_loop(settings.loop, settings.model.name, settings.closed_loop, controlled_models())
     assert err.value.key == key and allowed in str(err.value) and "\n" not in str(err.value)
 
 

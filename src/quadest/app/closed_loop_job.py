@@ -30,8 +30,8 @@ from quadest.app.settings import JobSettings
 from quadest.closed_loop.control_tables import control_entries, control_table, write_control_tables
 from quadest.closed_loop.figures import plot_tracking
 from quadest.closed_loop.loop import FlightRecord
+from quadest.closed_loop.loops import closed_loop_for, controlled_models
 from quadest.closed_loop.quadrotor import QuadrotorLoop
-from quadest.closed_loop.seed003 import closed_loop_for
 from quadest.config.closed_loop import validate_loop
 from quadest.estimators.registry import build_estimator
 from quadest.evaluation.job_tables import metric_tables
@@ -86,7 +86,7 @@ class ClosedLoopJob:
 
     def __init__(self, settings: JobSettings) -> None:
         exp = settings.experiment
-        validate_loop(exp.loop, exp.model.name, exp.closed_loop)
+        validate_loop(exp.loop, exp.model.name, exp.closed_loop, controlled_models())
         self.experiment, self.mode = exp, str(exp.loop)
         self.caches_data = self.mode != "estimate"
         # the loop goes to worker processes: its typed settings are module-level dataclasses, they pickle

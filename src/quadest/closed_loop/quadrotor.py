@@ -12,6 +12,7 @@ the three ways of flying it.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from quadest.quadrotor.controller import BacksteppingController
 from quadest.quadrotor.plant import PlantDraws, QuadrotorPlant
 from quadest.quadrotor.scenarios import AttitudeSteps, Reference, Scenario
 from quadest.runner import EstimatorTracker, FilterStart
+from quadest.simulation.quadrotor_data import MODEL as QUADROTOR_MODEL
 from quadest.simulation.quadrotor_data import (
     data_labels,
     draw_plant,
@@ -44,6 +46,9 @@ class QuadrotorLoop:
     """Everything a closed-loop job of ``model=quadrotor`` flies with, built once from the job's
     typed :class:`~quadest.config.settings.DataSettings` (the loop flies the model, sensors,
     scenario and closed-loop settings of the data, and records what the data builders record)."""
+
+    model_name: ClassVar[str] = QUADROTOR_MODEL.name
+    """The ``model`` option this loop flies (:func:`quadest.closed_loop.loops.closed_loop_for`)."""
 
     settings: DataSettings
     flown: Scenario

@@ -21,11 +21,11 @@ import numpy as np
 
 from quadest.closed_loop.feedback import TruthFeedback
 from quadest.closed_loop.quadrotor import QuadrotorLoop
-from quadest.config.settings import DataSettings
 from quadest.models.seed003_attitude import SLOTS, AttitudeRateModel, measure_states, seed003_filter_model, sensor_std
 from quadest.montecarlo import MonteCarloData
 from quadest.quadrotor.plant import QuadrotorPlant
 from quadest.runner import EstimatorTracker
+from quadest.simulation.seed003_attitude_data import MODEL as SEED003_MODEL
 from quadest.simulation.seed003_attitude_data import seed003_data, seed003_labels
 
 
@@ -78,6 +78,8 @@ class Seed003Loop(QuadrotorLoop):
     """The closed loop of ``model=seed003_attitude``: :class:`QuadrotorLoop`'s plant, controller,
     references and crash limits, with seed 003's feedback and its 5-state filter."""
 
+    model_name = SEED003_MODEL.name
+
     def shared_feedback(self, loop: str) -> TruthFeedback | MeasuredStatesFeedback:
         return TruthFeedback() if loop == "truth" else MeasuredStatesFeedback(sensor_std(self.settings.closed_loop))
 
@@ -94,8 +96,3 @@ class Seed003Loop(QuadrotorLoop):
     def _flight_data(self, model: AttitudeRateModel, states: np.ndarray) -> MonteCarloData:
         normals = self.draws.state_noise[:, : states.shape[1]]
         return seed003_data(self.settings, states, normals, seed003_labels(self.settings, self.flown.name))
-
-
-def closed_loop_for(settings: DataSettings) -> QuadrotorLoop:
-    """The closed loop of ``settings.model``."""
-    return (Seed003Loop if settings.model.name == "seed003_attitude" else QuadrotorLoop).from_settings(settings)

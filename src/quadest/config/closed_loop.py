@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -11,7 +12,6 @@ from quadest.config.ranges import require_non_negative, require_positive
 from quadest.errors import ConfigError
 
 LOOPS = ("open", "truth", "measured", "estimate")
-CONTROLLED_MODELS = ("quadrotor", "seed003_attitude")  # models whose filter state the controller can fly on
 
 
 @dataclass
@@ -50,17 +50,18 @@ class ClosedLoopConf:
     transient_window: float | None = None
 
 
-def validate_loop(loop: str, model_name: str, closed_loop: ClosedLoopConf) -> None:
-    """One-line :class:`ConfigError` for a bad ``loop`` (for ``model=<model_name>``) or
+def validate_loop(loop: str, model_name: str, closed_loop: ClosedLoopConf, controlled: Sequence[str]) -> None:
+    """One-line :class:`ConfigError` for a bad ``loop`` (for ``model=<model_name>``; ``controlled``:
+    the models with a closed loop, :func:`quadest.closed_loop.loops.controlled_models`) or
     ``closed_loop`` setting, before any work."""
     if loop not in LOOPS:
         raise ConfigError("loop", loop, f"one of {list(LOOPS)}")
     if loop == "open":
         return
-    if model_name not in CONTROLLED_MODELS:
+    if model_name not in controlled:
         raise ConfigError(
             "loop", loop, f"'open' only for model={model_name} (no controller flies on its filter state); "
-            f"closed loops need model in {list(CONTROLLED_MODELS)}",
+            f"closed loops need model in {list(controlled)}",
         )  # fmt: skip
     c = closed_loop
     for f in fields(c.state_sensor):
