@@ -163,6 +163,31 @@ def test_attitude_job_reports_degrees_convergence_figures_and_nine_dof(tmp_path)
         assert (out / "figures" / name).is_file(), name
 
 
+def test_the_settled_attitude_table_leaves_out_the_transient_and_diverged_runs(tmp_path):
+    """``python -m quadest.evaluation.attitude_figures DIR --settle S`` (the second command of
+    results/attitude): on level attitudes with a yaw offset of 30° before ``S`` and a known one after,
+    the RMS error angle and yaw error are that offset, roll and pitch 0; a run that diverged (NaN)
+    is left out."""
+    from quadest.evaluation.attitude_figures import main
+
+    time = np.arange(0.0, 2.0, 0.1)
+    yaw = np.random.default_rng(3).uniform(-3.0, 3.0, (3, time.size))
+    level = np.stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw], axis=-1)
+    truth = np.concatenate([quat.from_euler(level), np.zeros((3, time.size, 6))], axis=-1)
+    series = {"time": time, "truth": truth}
+    for name, offsets in (("a", [2.0, 2.0, 2.0]), ("b", [1.0, 3.0, np.nan])):
+        offset = np.where(time < 1.0, 30.0, np.asarray(offsets)[:, None])
+        shifted = level + np.stack([0 * offset, 0 * offset, np.radians(offset)], axis=-1)
+        series[f"{name}/estimate"] = np.concatenate([quat.from_euler(shifted), truth[..., 4:]], axis=-1)
+    np.savez(tmp_path / "timeseries.npz", **series)
+    main([str(tmp_path), "--settle", "1.0"])
+    table = pd.read_csv(tmp_path / "attitude_errors.csv").set_index("estimator")
+    expected = {"a": 2.0, "b": np.sqrt((1.0 + 9.0) / 2.0)}  # b's third run diverged
+    for name, rms in expected.items():
+        np.testing.assert_allclose(table.loc[name, ["error_angle_deg", "yaw_deg"]], rms, rtol=1e-9)
+        np.testing.assert_allclose(table.loc[name, ["roll_deg", "pitch_deg"]], 0.0, atol=1e-9)
+
+
 def test_a_model_without_a_primary_measurement_prints_nis_per_sensor(tmp_path):
     """model=ins updates only through its sensors: the printed line gives each sensor's NIS and
     no meaningless "0 dof" NIS of the empty primary measurement."""

@@ -43,7 +43,7 @@ from quadest.evaluation.formatting import markdown_table
 from quadest.evaluation.job_tables import MetricTables
 from quadest.evaluation.metrics import estimator_overview, parameter_columns, summarize
 from quadest.evaluation.paired import paired_comparison
-from quadest.models.attitude_figures import attitude_errors_deg
+from quadest.models.attitude import attitude_errors_deg
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
 from quadest.numerics import quaternion as quat
