@@ -143,9 +143,9 @@ MUTATIONS = (
     Mutation(
         "a job kind writes summary.json itself",
         "src/quadest/app/replay_job.py",
-        "        return Report(tables, fields, arrays, caption(data))\n",
+        "        return Report(tables, fields, arrays, caption(data), after)\n",
         '        (finished.out_dir / "summary.json").write_text("{}")\n'
-        "        return Report(tables, fields, arrays, caption(data))\n",
+        "        return Report(tables, fields, arrays, caption(data), after)\n",
         (PIPELINE + "test_only_the_pipeline_writes_summary_json_and_the_metric_tables",),
     ),
     Mutation(
@@ -335,7 +335,7 @@ MUTATIONS = (
     Mutation(
         "cache keys leave out the compiled-kernels backend",
         "src/quadest/cache/keys.py",
-        '            "kernels": kernel_backend(),\n',
+        '        "kernels": kernel_backend(),\n',
         "",
         (CACHE_KEYS + "test_the_kernels_backend_is_in_every_key",),
     ),
@@ -639,18 +639,32 @@ def copy_tree(files: list[str], dest: Path) -> None:
         shutil.copy2(ROOT / f, target)
 
 
-def apply(mutation: Mutation, dest: Path) -> None:
-    path = dest / mutation.file
+def stale(mutation: Mutation, root: Path = ROOT) -> str | None:
+    """Why ``mutation`` no longer applies to the tree at ``root`` (its file is gone, or its text does
+    not occur exactly once; a named test file or function is gone), or ``None``."""
+    path = root / mutation.file
     if not path.is_file():
-        sys.exit(f"mutations.py: {mutation.name!r}: {mutation.file} does not exist; update the mutation")
-    text = path.read_text()
-    count = text.count(mutation.old)
+        return f"{mutation.name!r}: {mutation.file} does not exist; update the mutation"
+    count = path.read_text().count(mutation.old)
     if count != 1:
-        sys.exit(
-            f"mutations.py: {mutation.name!r}: the text to replace occurs {count} times in {mutation.file} "
+        return (
+            f"{mutation.name!r}: the text to replace occurs {count} times in {mutation.file} "
             f"(must be exactly once); update the mutation. Text: {mutation.old!r}"
         )
-    path.write_text(text.replace(mutation.old, mutation.new))
+    for test in mutation.tests:
+        file, _, function = test.partition("::")
+        function = function.split("[")[0]
+        if not (root / file).is_file() or (function and f"def {function}(" not in (root / file).read_text()):
+            return f"{mutation.name!r}: the test {test} does not exist; update the mutation"
+    return None
+
+
+def apply(mutation: Mutation, dest: Path) -> None:
+    problem = stale(mutation, dest)
+    if problem is not None:
+        sys.exit(f"mutations.py: {problem}")
+    path = dest / mutation.file
+    path.write_text(path.read_text().replace(mutation.old, mutation.new))
 
 
 def environment(dest: Path) -> dict[str, str]:
@@ -707,6 +721,9 @@ def main(argv: list[str] | None = None) -> int:
         for m in chosen:
             print(f"{m.name}\n    {m.file}\n    " + "\n    ".join(m.tests))
         return 0
+    problems = [problem for m in chosen if (problem := stale(m)) is not None]
+    if problems:
+        sys.exit("mutations.py: " + "\nmutations.py: ".join(problems))
     files = tree_files()
     if not args.no_baseline:
         union = tuple(dict.fromkeys(t for m in chosen for t in m.tests))
