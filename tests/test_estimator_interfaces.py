@@ -155,13 +155,17 @@ def test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raisi
 # --- 2. noise as distributions -----------------------------------------------------------------
 
 
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
 @pytest.mark.parametrize("structure", ["correlated", "diagonal"])
-def test_gaussian_noise_log_density_and_sampling(structure):
+def test_gaussian_noise_log_density_and_sampling(structure, backend, monkeypatch):
     """Against scipy (its eigendecomposition route agrees to round-off: rtol 1e-10) and against the
     Cholesky-and-solve rule written out here (a few ulps: rtol 1e-14). A diagonal covariance takes
     the models' shortcut (no solve, one product per drawn value), whose draws must be the general
     rule's values exactly (the matrix product's other terms are exact zeros); a semi-definite
-    diagonal still has no density (Cholesky raises, as for any singular covariance)."""
+    diagonal still has no density (Cholesky raises, as for any singular covariance). On both
+    backends (``QUADEST_KERNELS``): the diagonal shortcut is a compiled kernel on numba and its
+    numpy reference otherwise."""
+    monkeypatch.setenv("QUADEST_KERNELS", backend)
     rng = np.random.default_rng(0)
     Q, R = random_spd(rng, 3, 0.5), random_spd(rng, 2, 0.2)
     if structure == "diagonal":
