@@ -334,21 +334,33 @@ def test_both_models_refuse_a_bad_magnetometer_naming_the_key(model, override, k
 # --- the filterpy baselines in error coordinates ---
 
 
-def test_filterpy_ekf_on_the_manifold_is_the_mekf_without_reset_jacobian():
+def _smoothed(est, *args):
+    """The fixed-interval smoothed means and covariances of :func:`_filter`'s run."""
+    steps: list = []
+    means, covs = _filter(est, *args, steps=steps)
+    return rts_backward(list(means), covs[-1], steps, est.smoothing_form())
+
+
+@pytest.mark.parametrize("run", [_filter, _smoothed], ids=["filter", "smoother"])
+def test_filterpy_ekf_on_the_manifold_is_the_mekf_without_reset_jacobian(run):
     """filterpy's EKF carrying the error state about a reference (``estimators/local_coordinates``)
     is the multiplicative EKF with Markley's reset (``reset_jacobian: false``): the same Jacobians,
     the same Joseph update. Only the linear algebra differs (filterpy inverts S, the MEKF solves
     with it), so they agree to round-off: relative 1e-16 amplified by cond(S) ≲ 1e4 and by 100
-    steps of accumulation stays below 1e-9 of σ."""
+    steps of accumulation stays below 1e-9 of σ. Their RTS smoothers too: the same smoother steps,
+    the correction injected with ⊞, the backward pass solving with the same predicted covariances."""
     B = 3
     model = _model(B, errors=True)
     x, u, acc, mag = _synthetic(model, 100, 1.0, seed=11)
     x0, P0 = _prior(B, model, x[:, 0], (0.05, 0.01, 0.1), seed=12)
-    ref_m, ref_P = _filter(ErrorStateEKF(model, reset_jacobian=False), x, u, acc, mag, x0, P0)
-    m, P = _filter(BatchedFilterpyEKF(model), x, u, acc, mag, x0, P0)
+    ref_m, ref_P = run(ErrorStateEKF(model, reset_jacobian=False), x, u, acc, mag, x0, P0)
+    m, P = run(BatchedFilterpyEKF(model), x, u, acc, mag, x0, P0)
     sigma = np.sqrt(np.diagonal(ref_P, axis1=-2, axis2=-1))
     assert np.abs(model.boxminus(m, ref_m) / sigma).max() < 1e-9
     assert np.abs(P - ref_P).max() <= 1e-9 * np.abs(ref_P).max()
+    if run is _smoothed:
+        filtered_m, _ = _filter(ErrorStateEKF(model, reset_jacobian=False), x, u, acc, mag, x0, P0)
+        assert np.abs(model.boxminus(filtered_m[:-1], ref_m[:-1]) / sigma[:-1]).max() > 1e-3  # it did smooth
 
 
 def test_filterpy_ukf_on_the_manifold_equals_the_mekf_on_a_nearly_linear_case():
@@ -363,31 +375,6 @@ def test_filterpy_ukf_on_the_manifold_equals_the_mekf_on_a_nearly_linear_case():
     sigma = np.sqrt(np.diagonal(ref_P, axis1=-2, axis2=-1))
     assert np.abs(model.boxminus(m, ref_m) / sigma).max() < 1e-2
     assert np.abs(P - ref_P).max() <= 5e-3 * np.abs(ref_P).max()
-
-
-def _smoothed(est, *args):
-    """The fixed-interval smoothed means and covariances of :func:`_filter`'s run."""
-    steps: list = []
-    means, covs = _filter(est, *args, steps=steps)
-    return rts_backward(list(means), covs[-1], steps, est.smoothing_form())
-
-
-def test_filterpy_ekf_smoother_on_the_manifold_is_the_mekf_smoother_without_reset_jacobian():
-    """The RTS smoother of filterpy's EKF in error coordinates against the MEKF's without the reset
-    Jacobian: the same filter (above), the same smoother steps, the correction injected with ⊞.
-    The backward pass solves with the same predicted covariances, so the round-off argument and
-    tolerance of the filters' test hold."""
-    B = 3
-    model = _model(B, errors=True)
-    x, u, acc, mag = _synthetic(model, 100, 1.0, seed=11)
-    x0, P0 = _prior(B, model, x[:, 0], (0.05, 0.01, 0.1), seed=12)
-    ref_m, ref_P = _smoothed(ErrorStateEKF(model, reset_jacobian=False), x, u, acc, mag, x0, P0)
-    m, P = _smoothed(BatchedFilterpyEKF(model), x, u, acc, mag, x0, P0)
-    sigma = np.sqrt(np.diagonal(ref_P, axis1=-2, axis2=-1))
-    assert np.abs(model.boxminus(m, ref_m) / sigma).max() < 1e-9
-    assert np.abs(P - ref_P).max() <= 1e-9 * np.abs(ref_P).max()
-    filtered_m, _ = _filter(ErrorStateEKF(model, reset_jacobian=False), x, u, acc, mag, x0, P0)
-    assert np.abs(model.boxminus(filtered_m[:-1], ref_m[:-1]) / sigma[:-1]).max() > 1e-3  # it did smooth
 
 
 def test_filterpy_ukf_smoother_on_the_manifold_equals_the_mekf_smoother_on_a_nearly_linear_case():
