@@ -20,6 +20,9 @@ run):
 
 The ratios printed are EKF / UKF from this run, against both the UKF as ``estimator=ukf`` runs it
 now and the previous per-run adapter (the UKF step the target EKF ≤ 0.3× UKF was first set against).
+
+``--quick`` runs every stage at toy sizes (4 runs, 3 steps, few repeats): what the test suite runs
+so that a broken script fails it (tests/test_benchmarks_quick.py). Its numbers mean nothing.
 """
 
 from __future__ import annotations
@@ -55,17 +58,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="end with one JSON line of the results")
     parser.add_argument("--steps", type=int, default=100, help="filter steps timed per measurement")
+    parser.add_argument("--quick", action="store_true", help="every stage at toy sizes, numbers meaningless (tests)")
     args = parser.parse_args()
-    steps = args.steps
-    data = build_data(config([f"runs={RUNS}", f"duration={(steps + 1) * 0.01}"]))
+    steps, runs, call_repeats = (3, 4, 2) if args.quick else (args.steps, RUNS, 300)
+    data = build_data(config([f"runs={runs}", f"duration={(steps + 1) * 0.01}"]))
     u = filter_inputs(data)
     model = data.model
 
     def per_run_us(make, repeats: int = 2) -> float:
-        return min(time_steps(make(), data, u, steps) for _ in range(repeats)) / RUNS
+        return min(time_steps(make(), data, u, steps) for _ in range(repeats)) / runs
 
     result = {
-        "runs": RUNS,
+        "runs": runs,
         "steps": steps,
         "ukf_us": per_run_us(lambda: BatchedFilterpyUKF(model, alpha=0.5)),
         "ukf_per_run_calls_us": per_run_us(lambda: PerRunAdapter(model, FilterpyUKF, alpha=0.5)),
@@ -88,14 +92,14 @@ def main() -> None:
         "H": (lambda: one.H(x1, u1), lambda: model.H(x, u0)),
     }
     result["model_call_us"] = {
-        name: {"one_point": call_time_us(single), f"batch_{RUNS}": call_time_us(batch)}
+        name: {"one_point": call_time_us(single, call_repeats), f"batch_{runs}": call_time_us(batch, call_repeats)}
         for name, (single, batch) in calls.items()
     }
     result["ekf_over_ukf"] = result["ekf_us"] / result["ukf_us"]
     result["ekf_over_ukf_per_run_calls"] = result["ekf_us"] / result["ukf_per_run_calls_us"]
     result["ekf_per_run_calls_over_ukf"] = result["ekf_per_run_calls_us"] / result["ukf_us"]
 
-    print(f"{model.name} (n={model.n}, m={model.m}), {RUNS} runs, {steps} steps, us per filter step per run")
+    print(f"{model.name} (n={model.n}, m={model.m}), {runs} runs, {steps} steps, us per filter step per run")
     print(f"  filterpy UKF, model evaluated per batch (estimator=ukf){result['ukf_us']:8.1f}")
     print(f"  filterpy UKF, one model call per run                   {result['ukf_per_run_calls_us']:8.1f}")
     print(f"  filterpy UKF, per-point fx/hx                          {result['ukf_per_point_us']:8.1f}")
@@ -112,7 +116,7 @@ def main() -> None:
     print(f"  SR-UKF, numpy references (QUADEST_KERNELS=numpy)       {result['srukf_numpy_kernels_us']:8.1f}")
     print("model calls, us per call (one point / the whole batch; f and h compiled, *_numpy their references):")
     for name, times in result["model_call_us"].items():
-        print(f"  {name:8s} {times['one_point']:7.1f} / {times[f'batch_{RUNS}']:7.1f}")
+        print(f"  {name:8s} {times['one_point']:7.1f} / {times[f'batch_{runs}']:7.1f}")
     if args.json:
         rounded = {k: round(v, 3) if isinstance(v, float) else v for k, v in result.items()}
         calls_us = result["model_call_us"]

@@ -26,6 +26,10 @@ filters' kernels are loaded (or compiled) before any timing:
        python benchmarks/bench_particle.py --particles-python /tmp/particles-env/bin/python
 
    Without it the script prints a note and skips this column.
+
+``--quick`` runs every stage at toy sizes (4 runs × 50 particles, 3 steps, one timing repeat, the
+compile script on the existing numba cache): what the test suite runs so that a broken script
+fails it (tests/test_benchmarks_quick.py). Its numbers mean nothing.
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ from hydra.core.global_hydra import GlobalHydra
 
 from measure import best_us, fresh_process_runs
 from quadest.app.schema import register_schemas
+from quadest.app.settings import data_settings
 from quadest.config.paths import config_dir
 from quadest.estimators.particle import BootstrapPF, gather_particles
 from quadest.models.base import _gaussian_logpdf
@@ -56,6 +61,7 @@ from quadest.runner import run_estimator
 from quadest.simulation.validation_data import build_ungm_data
 
 PARTICLES = 1000
+RUNS = 100
 
 
 def ungm_data(runs: int):
@@ -63,21 +69,21 @@ def ungm_data(runs: int):
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
         cfg = compose(config_name="config", overrides=["experiment=ungm_toolbox", f"runs={runs}"])
-    return build_ungm_data(cfg)
+    return build_ungm_data(data_settings(cfg))
 
 
-def batched_pf(data) -> BootstrapPF:
-    est = BootstrapPF(data.model, particles=PARTICLES, resampling="stratified", estimate="resampled")
+def batched_pf(data, particles: int) -> BootstrapPF:
+    est = BootstrapPF(data.model, particles=particles, resampling="stratified", estimate="resampled")
     est.set_generators([np.random.default_rng(s) for s in data.estimator_seeds])
     B, n = data.x0.shape
     est.initialize(data.x0, np.broadcast_to(data.P0, (B, n, n)).copy())
     return est
 
 
-def time_batched(data, steps: int) -> float:
+def time_batched(data, steps: int, particles: int = PARTICLES) -> float:
     """ns per particle per step of quadest's pf over the whole batch, after two untimed steps
     (which load the compiled kernels)."""
-    est = batched_pf(data)
+    est = batched_pf(data, particles)
     for k in range(1, 3):
         est.predict(data.inputs[:, k - 1])
         est.update(data.measurements[:, k], data.inputs[:, k])
@@ -85,7 +91,7 @@ def time_batched(data, steps: int) -> float:
     for k in range(3, steps + 3):
         est.predict(data.inputs[:, k - 1])
         est.update(data.measurements[:, k], data.inputs[:, k])
-    return (time.perf_counter() - start) / (steps * data.x0.shape[0] * PARTICLES) * 1e9
+    return (time.perf_counter() - start) / (steps * data.x0.shape[0] * particles) * 1e9
 
 
 def on_backend(backend: str, fun: Callable[[], float]) -> float:
@@ -100,7 +106,7 @@ def on_backend(backend: str, fun: Callable[[], float]) -> float:
             os.environ[square_root.KERNELS_ENV] = before
 
 
-def kernel_ratios(B: int = 100, N: int = PARTICLES) -> dict[str, dict[str, float]]:
+def kernel_ratios(B: int = RUNS, N: int = PARTICLES, repeats: int = 20, blocks: int = 5) -> dict[str, dict[str, float]]:
     """Each compiled particle kernel against its numpy reference on the benchmark's sizes: µs per
     call for the batch on each backend and compiled ÷ numpy (the resampling from given uniforms)."""
     rng = np.random.default_rng(0)
@@ -136,8 +142,8 @@ def kernel_ratios(B: int = 100, N: int = PARTICLES) -> dict[str, dict[str, float
     rngs = [np.random.default_rng(s) for s in range(B)]
     result = {}
     for name, (compiled, reference) in pairs.items():
-        numba_us = on_backend("numba", lambda f=compiled: best_us(f, repeats=20))
-        numpy_us = on_backend("numpy", lambda f=reference: best_us(f, repeats=20))
+        numba_us = on_backend("numba", lambda f=compiled: best_us(f, repeats, blocks))
+        numpy_us = on_backend("numpy", lambda f=reference: best_us(f, repeats, blocks))
         result[name] = {
             "numba_us": round(numba_us, 1),
             "numpy_us": round(numpy_us, 1),
@@ -164,50 +170,50 @@ print(json.dumps({"import_s": imported - start, "first_calls_s": time.perf_count
 """
 
 
-def compile_times() -> dict[str, float]:
+def compile_times(fresh_cache: bool = True) -> dict[str, float]:
     """The first steps of ``pf`` with each resampling scheme in a fresh process with an empty numba
     cache (the particle kernels and the UNGM f/h compile), then in a second fresh process with that
-    cache (they load)."""
-    runs = fresh_process_runs(COMPILE_SCRIPT)
+    cache (they load); ``fresh_cache=False``: both on the existing cache."""
+    runs = fresh_process_runs(COMPILE_SCRIPT, fresh_cache)
     return {"compile_s": round(runs[0]["first_calls_s"], 2), "cached_load_s": round(runs[1]["first_calls_s"], 2)}
 
 
-def time_filterpy_loop(data, steps: int) -> float:
+def time_filterpy_loop(data, steps: int, particles: int = PARTICLES) -> float:
     """ns per particle per step of a per-run bootstrap filter resampling with filterpy."""
     model = data.model
     q, r = float(np.sqrt(model.Q[0, 0])), float(model.R[0, 0])
     np.random.seed(0)
     rng = np.random.default_rng(0)
     B = data.x0.shape[0]
-    clouds = [data.x0[i, 0] + np.sqrt(data.P0[0, 0]) * rng.standard_normal(PARTICLES) for i in range(B)]
+    clouds = [data.x0[i, 0] + np.sqrt(data.P0[0, 0]) * rng.standard_normal(particles) for i in range(B)]
     start = time.perf_counter()
     for k in range(1, steps + 1):
         for i in range(B):
             x = clouds[i]
             x = 0.5 * x + 25.0 * x / (1.0 + x * x) + 8.0 * np.cos(1.2 * data.inputs[i, k - 1, 0])
-            x = x + q * rng.standard_normal(PARTICLES)
+            x = x + q * rng.standard_normal(particles)
             w = np.exp(-0.5 * (data.measurements[i, k, 0] - x * x / 20.0) ** 2 / r)
             w /= w.sum()
             clouds[i] = x[stratified_resample(w)]
-    return (time.perf_counter() - start) / (steps * B * PARTICLES) * 1e9
+    return (time.perf_counter() - start) / (steps * B * particles) * 1e9
 
 
-def time_full_experiment(data) -> float:
+def time_full_experiment(data, particles: int = PARTICLES) -> float:
     """Wall time in s of the runner with pf on the whole experiment."""
-    est = BootstrapPF(data.model, particles=PARTICLES, resampling="stratified", estimate="resampled")
+    est = BootstrapPF(data.model, particles=particles, resampling="stratified", estimate="resampled")
     start = time.perf_counter()
     run_estimator("pf", est, data, divergence_bound=1e6)
     return time.perf_counter() - start
 
 
-def time_particles_library(python: str, data, steps: int) -> dict:
+def time_particles_library(python: str, data, steps: int, particles: int = PARTICLES) -> dict:
     """Run ``particles_ungm.py`` with ``python`` on the first ``steps`` measurements of every run."""
     with tempfile.TemporaryDirectory() as tmp:
         measurements = Path(tmp) / "measurements.npy"
         np.save(measurements, data.measurements[:, 1 : steps + 1, 0])
         script = Path(__file__).with_name("particles_ungm.py")
         out = subprocess.run(
-            [python, str(script), str(measurements), str(PARTICLES)], capture_output=True, text=True, check=True
+            [python, str(script), str(measurements), str(particles)], capture_output=True, text=True, check=True
         )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -222,21 +228,25 @@ def main() -> None:
         default=os.environ.get("QUADEST_PARTICLES_PYTHON"),
         help="Python of a separate environment with particles 0.4 installed (default: $QUADEST_PARTICLES_PYTHON)",
     )
+    parser.add_argument("--quick", action="store_true", help="every stage at toy sizes, numbers meaningless (tests)")
     args = parser.parse_args()
+    runs, N = (4, 50) if args.quick else (RUNS, PARTICLES)
+    steps, loop_steps = (3, 2) if args.quick else (args.steps, args.loop_steps)
+    timing = {"repeats": 1, "blocks": 1} if args.quick else {}
     load_before = os.getloadavg()[0]
-    data = ungm_data(100)
-    batched = on_backend("numba", lambda: time_batched(data, args.steps))
-    batched_numpy = on_backend("numpy", lambda: time_batched(data, args.steps))
-    loop = time_filterpy_loop(data, args.loop_steps)
-    full = time_full_experiment(data)
-    ratios = kernel_ratios()
-    compile_s = compile_times()
-    library = time_particles_library(args.particles_python, data, args.steps) if args.particles_python else None
-    print(f"pf, 100 runs x {PARTICLES} particles: {batched:.1f} ns per particle per step (compiled kernels)")
+    data = ungm_data(runs)
+    batched = on_backend("numba", lambda: time_batched(data, steps, N))
+    batched_numpy = on_backend("numpy", lambda: time_batched(data, steps, N))
+    loop = time_filterpy_loop(data, loop_steps, N)
+    full = time_full_experiment(data, N)
+    ratios = kernel_ratios(runs, N, **timing)
+    compile_s = compile_times(fresh_cache=not args.quick)
+    library = time_particles_library(args.particles_python, data, steps, N) if args.particles_python else None
+    print(f"pf, {runs} runs x {N} particles: {batched:.1f} ns per particle per step (compiled kernels)")
     print(f"pf on the numpy references (QUADEST_KERNELS=numpy): {batched_numpy:.1f} ns per particle per step")
     print(f"per-run loop with filterpy.stratified_resample: {loop:.1f} ns per particle per step")
     print(f"speed-up: {loop / batched:.1f}x (goal 20x; numpy references: {loop / batched_numpy:.1f}x)")
-    print("compiled particle kernels against their numpy references (100 runs x 1000 particles, µs per call):")
+    print(f"compiled particle kernels against their numpy references ({runs} runs x {N} particles, µs per call):")
     for name, r in ratios.items():
         ratio = r["compiled_over_numpy"]
         print(f"  {name:22s} {r['numba_us']:8.1f} vs {r['numpy_us']:8.1f}  compiled / numpy = {ratio:.3f}")
@@ -244,7 +254,7 @@ def main() -> None:
         f"first steps of pf with every scheme: {compile_s['compile_s']:.2f} s compiling the kernels "
         f"(empty cache), {compile_s['cached_load_s']:.2f} s loading them from the cache"
     )
-    print(f"runner, ungm_toolbox with pf (100 runs x {PARTICLES} particles x 500 steps): {full:.1f} s")
+    print(f"runner, ungm_toolbox with pf ({runs} runs x {N} particles x 500 steps): {full:.1f} s")
     load = (load_before, os.getloadavg()[0])
     print(f"1-minute load average before / after: {load[0]:.1f} / {load[1]:.1f} on {os.cpu_count()} cores")
     if library is None:

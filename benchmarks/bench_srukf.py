@@ -20,6 +20,10 @@ Everything is measured in the same run, on the same data:
    measured in fresh processes with an empty numba cache directory of their own).
 
 The 1-minute load average is printed before and after: the machine may be shared.
+
+``--quick`` runs every stage at toy sizes (B = 1 and 10, 5 steps, one timing repeat, a 10-run
+memory child, the compile script once on the existing numba cache): what the test suite runs so
+that a broken script fails it (tests/test_benchmarks_quick.py). Its numbers mean nothing.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from numba import get_num_threads, njit, prange
 
 from measure import best_us, fresh_process_runs
 from quadest.app.schema import register_schemas
+from quadest.app.settings import data_settings
 from quadest.config.paths import config_dir
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.filterpy_ukf import FilterpyUKF
@@ -47,13 +52,15 @@ from quadest.numerics import compiled, square_root
 from quadest.simulation.quadrotor_data import build_quadrotor_data
 
 BATCHES = (1, 10, 100, 1000)
+QUICK_BATCHES = (1, 10)
 
 
 def config(overrides: list[str]):
+    """The data settings of the default job with ``overrides``."""
     register_schemas()
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
-        return compose(config_name="config", overrides=overrides)
+        return data_settings(compose(config_name="config", overrides=overrides))
 
 
 def filter_inputs(data):
@@ -72,19 +79,21 @@ def time_steps(est, data, u, steps: int) -> float:
     return (time.perf_counter() - start) / steps * 1e6
 
 
-def peak_memory_mb(runs: int) -> float:
-    """Peak RSS of a child process that runs the full batch through the runner."""
+def peak_memory_mb(runs: int, duration: float = 20.0) -> float:
+    """Peak RSS of a child process that runs the full batch (``runs`` runs of ``duration`` s)
+    through the runner."""
     script = f"""
 import resource
 from hydra import compose, initialize_config_dir
 from quadest.config.paths import config_dir
 from quadest.app.schema import register_schemas
+from quadest.app.settings import data_settings
 from quadest.estimators.srukf import SRUKF
 from quadest.simulation.quadrotor_data import build_quadrotor_data
 from quadest.runner import run_estimator
 register_schemas()
 with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
-    cfg = compose(config_name="config", overrides=["runs={runs}"])
+    cfg = compose(config_name="config", overrides=["runs={runs}", "duration={duration}"])
 data = build_quadrotor_data(data_settings(cfg))
 run_estimator("srukf", SRUKF(data.model, 0.5), data, 50.0, saved_runs=3)
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
@@ -108,7 +117,7 @@ def kernel_inputs(B: int, n: int = 6, m: int = 6) -> dict[str, tuple]:
     }
 
 
-def kernel_ratios(B: int) -> dict[str, dict[str, float]]:
+def kernel_ratios(B: int, repeats: int = 50, blocks: int = 5) -> dict[str, dict[str, float]]:
     """Each public function on both backends (µs per call for the batch) and compiled ÷ numpy."""
     functions = {
         "qr": square_root.qr_factor,
@@ -122,7 +131,7 @@ def kernel_ratios(B: int) -> dict[str, dict[str, float]]:
         times = {}
         for backend in ("numba", "numpy"):
             os.environ[square_root.KERNELS_ENV] = backend
-            times[backend] = best_us(lambda f=functions[name], a=args: f(*a))
+            times[backend] = best_us(lambda f=functions[name], a=args: f(*a), repeats, blocks)
         out[name] = {
             "numba_us": round(times["numba"], 1),
             "numpy_us": round(times["numpy"], 1),
@@ -132,14 +141,14 @@ def kernel_ratios(B: int) -> dict[str, dict[str, float]]:
     return out
 
 
-@njit(parallel=True)
+@njit(parallel=True, cache=True)
 def _qr_threads(A, out, chunks):
     B, n, L = A.shape
     for c in prange(chunks):
         compiled.qr_factor_runs(A, out, np.empty((n, L)), c * B // chunks, (c + 1) * B // chunks)
 
 
-@njit(parallel=True)
+@njit(parallel=True, cache=True)
 def _cholupdate_threads(S, X, scale, downdate, out, failed, chunks):
     B, n, _ = S.shape
     for c in prange(chunks):
@@ -147,7 +156,7 @@ def _cholupdate_threads(S, X, scale, downdate, out, failed, chunks):
         compiled.cholupdate_runs(S, X, scale, downdate, out, failed, v, c * B // chunks, (c + 1) * B // chunks)
 
 
-def kernel_threads(B: int) -> dict[str, dict[str, float]]:
+def kernel_threads(B: int, repeats: int = 50, blocks: int = 5) -> dict[str, dict[str, float]]:
     """The serial kernels against the same bodies run by ``prange`` over one chunk of runs per
     thread (``parallel=True``), µs per call for the batch."""
     inputs = kernel_inputs(B)
@@ -162,7 +171,11 @@ def kernel_threads(B: int) -> dict[str, dict[str, float]]:
         ),
     }
     return {
-        name: {"serial_us": round(best_us(serial), 1), "parallel_us": round(best_us(parallel), 1), "threads": threads}
+        name: {
+            "serial_us": round(best_us(serial, repeats, blocks), 1),
+            "parallel_us": round(best_us(parallel, repeats, blocks), 1),
+            "threads": threads,
+        }
         for name, (serial, parallel) in pairs.items()
     }
 
@@ -184,10 +197,11 @@ print(json.dumps({"import_s": imported - start, "first_calls_s": time.perf_count
 """
 
 
-def compile_times() -> dict[str, float]:
+def compile_times(fresh_cache: bool = True) -> dict[str, float]:
     """First calls of the four kernels in a fresh process with an empty numba cache (they compile),
-    then in a second fresh process with that cache (they load), and numba's import time."""
-    runs = fresh_process_runs(COMPILE_SCRIPT)
+    then in a second fresh process with that cache (they load), and numba's import time
+    (``fresh_cache=False``: both processes on the existing cache)."""
+    runs = fresh_process_runs(COMPILE_SCRIPT, fresh_cache)
     return {
         "compile_s": round(runs[0]["first_calls_s"], 3),
         "cached_load_s": round(runs[1]["first_calls_s"], 3),
@@ -201,13 +215,17 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200, help="filter steps timed per measurement")
     parser.add_argument("--skip-memory", action="store_true", help="skip the 1000-run memory measurement")
     parser.add_argument("--skip-compile", action="store_true", help="skip the compile-time measurement")
+    parser.add_argument("--quick", action="store_true", help="every stage at toy sizes, numbers meaningless (tests)")
     args = parser.parse_args()
-    steps = args.steps
+    steps = 5 if args.quick else args.steps
+    batches = QUICK_BATCHES if args.quick else BATCHES
+    big = max(batches)
+    timing = {"repeats": 1, "blocks": 1} if args.quick else {}
     load_start = os.getloadavg()[0]
     print(f"load average (1 min) at the start: {load_start:.2f}")
-    compile_info = {} if args.skip_compile else compile_times()
+    compile_info = {} if args.skip_compile else compile_times(fresh_cache=not args.quick)
 
-    data_all = build_quadrotor_data(config([f"runs={max(BATCHES)}", f"duration={(steps + 1) * 0.01}"]))
+    data_all = build_quadrotor_data(config([f"runs={big}", f"duration={(steps + 1) * 0.01}"]))
     u_all = filter_inputs(data_all)
     single = build_quadrotor_data(config(["runs=1", f"duration={(steps + 1) * 0.01}"]))
     u1 = filter_inputs(single)
@@ -228,7 +246,7 @@ def main() -> None:
     fp_plain, fp_vec = filterpy_us(False), filterpy_us(True)
     sr_single_numpy = min(time_steps(SRUKF(single.model, alpha), single, u1, steps) for _ in range(2))
     est = SRUKF(data_all.model, alpha)
-    batched_numpy = min(time_steps(est, data_all, u_all, steps) for _ in range(2)) / max(BATCHES)
+    batched_numpy = min(time_steps(est, data_all, u_all, steps) for _ in range(2)) / big
     os.environ.pop(square_root.KERNELS_ENV)
     print(f"single run, {single.model.name} (n={single.model.n}), alpha={alpha}, {steps} steps")
     print(f"  SR-UKF                                 {sr_single:9.1f} us/step")
@@ -249,8 +267,8 @@ def main() -> None:
     )
 
     batched = {}
-    for B in BATCHES:
-        sub = data_all if B == max(BATCHES) else _subset(data_all, B)
+    for B in batches:
+        sub = data_all if B == big else _subset(data_all, B)
         est = SRUKF(sub.model, alpha)
         batched[str(B)] = min(time_steps(est, sub, u_all[:B], steps) for _ in range(2)) / B
     print("batched SR-UKF, us per filter step per run:")
@@ -260,17 +278,17 @@ def main() -> None:
             f"over vectorised filterpy loop {fp_vec / us:7.1f}x"
         )
     print(
-        f"  B={max(BATCHES):>5d}  {batched_numpy:9.2f} us   on the numpy kernels "
+        f"  B={big:>5d}  {batched_numpy:9.2f} us   on the numpy kernels "
         f"(speed-up over filterpy per-point loop {fp_plain / batched_numpy:.1f}x)"
     )
-    speedup = fp_plain / batched[str(max(BATCHES))]
+    speedup = fp_plain / batched[str(big)]
     print(
-        f"  B={max(BATCHES):>5d}  speed-up over the filterpy per-point loop calling the compiled model "
-        f"{fp_plain_compiled / batched[str(max(BATCHES))]:.1f}x"
+        f"  B={big:>5d}  speed-up over the filterpy per-point loop calling the compiled model "
+        f"{fp_plain_compiled / batched[str(big)]:.1f}x"
     )
-    kernels = kernel_ratios(max(BATCHES))
-    threads = kernel_threads(max(BATCHES))
-    print(f"square-root kernels at B={max(BATCHES)}, us per call for the batch (compiled / numpy reference):")
+    kernels = kernel_ratios(big, **timing)
+    threads = kernel_threads(big, **timing)
+    print(f"square-root kernels at B={big}, us per call for the batch (compiled / numpy reference):")
     for name, k in kernels.items():
         print(f"  {name:13s} {k['numba_us']:9.1f} / {k['numpy_us']:9.1f}   ratio {k['compiled_over_numpy']:.3f}")
     for name, k in threads.items():
@@ -295,7 +313,7 @@ def main() -> None:
         "filterpy_ukf_compiled_model_single_us": round(fp_plain_compiled, 2),
         "filterpy_ukf_vectorized_compiled_model_single_us": round(fp_vec_compiled, 2),
         "srukf_over_filterpy_vectorized_compiled_model": round(sr_single / fp_vec_compiled, 3),
-        "speedup_vs_filterpy_compiled_model": round(fp_plain_compiled / batched[str(max(BATCHES))], 1),
+        "speedup_vs_filterpy_compiled_model": round(fp_plain_compiled / batched[str(big)], 1),
         "srukf_numpy_kernels_single_us": round(sr_single_numpy, 2),
         "batched_numpy_kernels_us_per_step_run": round(batched_numpy, 3),
         "kernels": kernels,
@@ -304,9 +322,13 @@ def main() -> None:
         "peak_mem_mb_per_run": None,
     }
     if not args.skip_memory:
-        result["peak_mem_mb"] = round(peak_memory_mb(1000), 1)
-        result["peak_mem_mb_per_run"] = round(result["peak_mem_mb"] / 1000, 3)
-        print(f"peak RSS of a 1000-run, 20 s, 100 Hz batch (truth + SR-UKF + metrics): {result['peak_mem_mb']} MB")
+        runs, duration = (10, 0.5) if args.quick else (1000, 20.0)
+        result["peak_mem_mb"] = round(peak_memory_mb(runs, duration), 1)
+        result["peak_mem_mb_per_run"] = round(result["peak_mem_mb"] / runs, 3)
+        print(
+            f"peak RSS of a {runs}-run, {duration:g} s, 100 Hz batch (truth + SR-UKF + metrics): "
+            f"{result['peak_mem_mb']} MB"
+        )
     print(f"this process peak RSS: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
     result["load_average"] = {"start": round(load_start, 2), "end": round(os.getloadavg()[0], 2)}
     print(f"load average (1 min) at the end: {result['load_average']['end']:.2f}")

@@ -27,13 +27,17 @@ def best_us(fun: Callable[[], object], repeats: int = 50, blocks: int = 5) -> fl
     return best
 
 
-def fresh_process_runs(script: str) -> list[dict]:
+def fresh_process_runs(script: str, fresh_cache: bool = True) -> list[dict]:
     """The JSON line ``script`` prints, from two fresh processes sharing an empty numba cache
-    directory of their own: the first compiles the kernels it calls, the second loads them."""
+    directory of their own: the first compiles the kernels it calls, the second loads them.
+    ``fresh_cache=False`` (the scripts' quick mode) runs one process on the existing cache, given
+    as both: the script is exercised, the compile time is not measured."""
     with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "NUMBA_CACHE_DIR": cache, KERNELS_ENV: "numba"}
+        env = {**os.environ, KERNELS_ENV: "numba"}
+        if fresh_cache:
+            env["NUMBA_CACHE_DIR"] = cache
         return [
             json.loads(subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
                                       check=True).stdout)
-            for _ in range(2)
-        ]  # fmt: skip
+            for _ in range(2 if fresh_cache else 1)
+        ] * (1 if fresh_cache else 2)  # fmt: skip
