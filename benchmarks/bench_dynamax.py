@@ -29,11 +29,10 @@ is predict + update per step and run, dynamax's the ``jit(vmap)`` call per step 
 steps, see ``dynamax_filters.py``), and dynamax's compile time is reported apart. quadest's
 first-step time (building the filter and loading its compiled kernels) is reported the same way.
 
-**Correctness before timing**: at the largest B the two sides' posterior means must agree to
-``AGREEMENT`` posterior standard deviations at every step and run, and their covariances to
-``AGREEMENT`` relative; the largest differences are printed next to the same comparison between
-quadest's own UKF and SR-UKF (two float64 implementations of the same filter: the round-off
-scale). A mismatch is an error, and no timing of that model is printed.
+**Correctness before timing**: at the largest B the two sides' posterior means and covariances
+must agree at every step and run to within round-off, measured as the same comparison between
+quadest's own UKF and SR-UKF (two float64 implementations of the same filter; ``ROUND_OFF_FACTOR``
+below). A mismatch is an error, and no timing is printed.
 
 ``--quick`` runs every stage at toy sizes (B = 1 and 4, 5 steps, one repeat): what the test suite
 runs so that a broken script fails it (tests/test_benchmarks_quick.py). Its numbers mean nothing.
@@ -71,11 +70,16 @@ BATCHES = (1, 100, 1000)
 QUICK_BATCHES = (1, 4)
 ALPHA, BETA, KAPPA = 0.5, 2.0, 0.0
 AGREEMENT = 1e-6
-"""Largest allowed difference of the two sides' estimates, in posterior standard deviations (and of
-their covariances, relative). Two float64 implementations of the same recursion differ by
-round-off, amplified along the run: 10⁻¹²–10⁻⁸ here (printed beside the check as quadest's UKF
-against its SR-UKF); a different filter (other weights, another λ, Q or R missing, the update at
-the wrong step) moves the estimates by 10⁻³ standard deviations or more."""
+ROUND_OFF_FACTOR = 10.0
+"""The two sides' estimates must agree to ``max(AGREEMENT, ROUND_OFF_FACTOR × d)`` posterior
+standard deviations (means) and relative (covariances), where ``d`` is the same difference between
+quadest's own covariance-form UKF and SR-UKF on that model: two float64 implementations of one
+recursion differ by round-off, amplified along the run, and dynamax cannot be asked to be closer to
+quadest than quadest's two forms are to each other. On the attitude model ``d`` is 10⁻¹³ (the limit
+is then 10⁻⁶); on UNGM, whose UKF amplifies round-off over 100 steps (P collapses and regrows
+near x = 0), ``d`` reaches 10⁻³ at B = 1000. A different filter is caught: dynamax's UKF with
+β = 0 instead of 2, in ``--quick`` (4 runs, 5 steps), differs by 1.6 standard deviations on UNGM
+and by 1.5·10⁻⁶ on the nearly linear attitude model (its limit 10⁻⁶)."""
 
 G, RATE_DAMPING, DT = 9.81, 2.0, 0.01  # as dynamax_filters.py
 
@@ -258,12 +262,22 @@ def main() -> None:
                 agreement[f"{name}: {kind} vs dynamax {dyn}"] = differences(*estimates[f"{name}/{kind}"], *their)
 
     print(f"1-minute load average at the start: {load[0][0]:.2f} ({os.cpu_count()} cores)")
-    print(f"agreement at B = {big}, largest over runs and steps (limit {AGREEMENT:g}):")
+    limits = {
+        name: max(
+            AGREEMENT, ROUND_OFF_FACTOR * max(agreement[f"{name}: ukf vs srukf (quadest, round-off scale)"].values())
+        )
+        for name in problems
+    }
+    print(f"agreement at B = {big}, largest over runs and steps:")
     for label, diff in agreement.items():
-        print(f"  {label:42s} means {diff['mean_sd']:9.2e} sd, covariances {diff['covariance_rel']:9.2e}")
-    failed = [label for label, d in agreement.items() if max(d.values()) > AGREEMENT]
+        limit = limits[label.split(":")[0]]
+        print(
+            f"  {label:42s} means {diff['mean_sd']:9.2e} sd, covariances {diff['covariance_rel']:9.2e}"
+            f"   (limit {limit:.1e})"
+        )
+    failed = [label for label, d in agreement.items() if max(d.values()) > limits[label.split(":")[0]]]
     if failed:
-        raise SystemExit(f"the filters disagree beyond {AGREEMENT:g}: {', '.join(failed)}; no timing printed")
+        raise SystemExit(f"the filters disagree beyond round-off: {', '.join(failed)}; no timing printed")
 
     print("µs per step and run (quadest: predict + update; dynamax: jit(vmap) call), quadest ÷ dynamax:")
     for name in problems:

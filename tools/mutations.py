@@ -620,6 +620,13 @@ MUTATIONS = (
             "tests/test_sensor_plugins.py::test_the_data_key_covers_a_sensor_plugins_source",
         ),
     ),
+    Mutation(
+        "a benchmark script broken where only a full run reaches (the memory child's missing import)",
+        "benchmarks/bench_srukf.py",
+        "from quadest.app.settings import data_settings\nfrom quadest.estimators.srukf import SRUKF",
+        "from quadest.estimators.srukf import SRUKF",
+        ("tests/test_benchmarks_quick.py::test_quick_mode_runs",),
+    ),
 )  # fmt: skip
 
 
