@@ -17,7 +17,9 @@ A claim whose verdict turns on a reconstruction choice the source does not fix n
 measure). Readings that disagree make the claim *not comparable*; readings that agree give their
 common verdict; a reading not run leaves the claim *inconclusive*, with the ``why`` saying what
 would decide it. A claim marked ``testable: false`` gives ``why`` and is *not testable*. Every
-verdict other than *reproduced* needs a ``cause`` (a claim file without one is an error).
+verdict other than *reproduced* needs a ``cause`` (a claim file without one is an error). A claim
+that our results could decide but no checked-in run does gives ``needs`` (the run that would decide
+it) instead of a measure, and is *inconclusive*.
 
 The tests of the claims of one source in one job (one results file, one sweep cell) are one family:
 their raw p are Holm-corrected over that family here, and a test that cannot pass at its run count
@@ -42,7 +44,7 @@ from quadest.aggregate import verdicts as v
 from quadest.aggregate.reproductions_render import render_csv, render_markdown
 
 CLAIM_KEYS = {"claim", "where", "source_value", "command", "measure", "expect", "cause", "testable", "why",
-              "choice", "readings"}  # fmt: skip
+              "choice", "readings", "needs"}  # fmt: skip
 READING_KEYS = {"reading", "command", "measure", "expect", "why"}
 MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit", "p", "test", "runs"}
 PAIR_COLUMNS = {"pair", "estimator", "reference", "state", "arm", "metric", "step"}
@@ -190,6 +192,10 @@ def _read_claim(claim: dict, root: Path, label: str) -> _Pending:
         if not str(claim.get("why", "")).strip():
             raise ClaimError(f"{label}: a claim with testable: false needs 'why'")
         return _Pending(label, claim, [])
+    if "needs" in claim:
+        if not str(claim["needs"]).strip() or {"command", "measure", "readings"} & set(claim):
+            raise ClaimError(f"{label}: 'needs' names the run that would decide the claim, without a measure")
+        return _Pending(label, claim, [])
     readings = []
     for spec in _readings(claim, label):
         if "measure" not in spec:
@@ -230,6 +236,8 @@ def _decide(item: _Pending, corrected: dict[int, tuple[float, int]], source: str
     claim = item.claim
     base = dict(source=source, claim=claim["claim"], where=claim["where"], source_value=str(claim["source_value"]),
                 choice=str(claim.get("choice", "")).strip())  # fmt: skip
+    if "needs" in claim:
+        return Entry(**base, outcomes=(), verdict=v.INCONCLUSIVE, cause=" ".join(str(claim["needs"]).split()))
     if not item.readings:
         return Entry(**base, outcomes=(), verdict=v.NOT_TESTABLE, cause=" ".join(str(claim["why"]).split()))
     outcomes = []
