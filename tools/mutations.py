@@ -620,6 +620,48 @@ MUTATIONS = (
             "tests/test_sensor_plugins.py::test_the_data_key_covers_a_sensor_plugins_source",
         ),
     ),
+    Mutation(
+        "the ledger's interval loses its order under a negative scale",
+        "src/quadest/aggregate/reproductions.py",
+        "        low, high = high, low",
+        "        pass",
+        ("tests/test_reproductions.py::test_a_negative_scale_keeps_the_interval_ordered",),
+    ),
+    Mutation(
+        "the ledger reads a CI wholly on the other side of the claim as undecided",
+        "src/quadest/aggregate/verdicts.py",
+        '        return "claim" if high < rule.high else "other" if low >= rule.high else "neither"',
+        '        return "claim" if high < rule.high else "neither"',
+        ("tests/test_reproductions.py::test_verdicts_follow_the_interval",),
+    ),
+    Mutation(
+        "the ledger takes the raw p of a claim for its Holm-corrected p",
+        "src/quadest/aggregate/verdicts.py",
+        "    return [float(x) for x in holm(np.asarray(p_raw, dtype=float))]",
+        "    return [float(x) for x in p_raw]",
+        ("tests/test_reproductions.py::test_holm_runs_over_the_sources_claims_in_a_job_not_over_every_pair",),
+    ),
+    Mutation(
+        "the ledger accepts a rank test that cannot pass at its run count",
+        "src/quadest/aggregate/verdicts.py",
+        "    if floor >= SIGNIFICANCE:",
+        "    if floor > 1:",
+        ("tests/test_reproductions.py::test_a_test_that_cannot_pass_at_its_run_count_is_refused",),
+    ),
+    Mutation(
+        "the runs an undecided claim needs scale as 1/n instead of 1/sqrt(n)",
+        "src/quadest/aggregate/verdicts.py",
+        "    return math.ceil(runs * (half_width / distance) ** 2)",
+        "    return math.ceil(runs * (half_width / distance))",
+        ("tests/test_reproductions.py::test_runs_needed_follow_the_half_width_scaling",),
+    ),
+    Mutation(
+        "a docs number over several rows takes the first row instead of its min, max or mean",
+        "src/quadest/aggregate/doc_numbers.py",
+        "    value = values[0] if reduce is None else REDUCERS[reduce](values)",
+        "    value = values[0]",
+        ("tests/test_doc_numbers.py::test_ranges_scales_and_signs",),
+    ),
 )  # fmt: skip
 
 
