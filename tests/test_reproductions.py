@@ -6,6 +6,7 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
@@ -211,3 +212,12 @@ def test_check_mode_reports_a_stale_ledger(table: Path, capsys):
     (claims / "a.yaml").write_text(yaml.safe_dump({"title": "A", "claims": [claim("y", {"below": 0})]}))
     assert ledger.main(["--root", str(table)]) == 2
     assert "cause" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("runs", range(3, 11))
+def test_the_smallest_wilcoxon_p_is_scipys_exact_one(runs: int):
+    """All n differences of one sign give the exact two-sided signed-rank p its minimum, which the
+    refusal rule assumes is 2 / 2^n."""
+    from scipy.stats import wilcoxon
+
+    assert verdicts.minimum_p("wilcoxon", runs) == pytest.approx(wilcoxon(np.arange(1.0, runs + 1)).pvalue, rel=1e-12)
