@@ -148,6 +148,12 @@ def test_runs_needed_follow_the_half_width_scaling(table: Path):
     assert entry.outcomes[0].decision.effect_bound == pytest.approx(5.0)
 
 
+def test_a_claim_no_run_decides_is_inconclusive(table: Path):
+    spec = {"claim": "c", "where": "§1", "source_value": "v", "needs": "a run with 3 beacons"}
+    entry = ledger.build_entry(spec, table, "t")
+    assert entry.verdict == verdicts.INCONCLUSIVE and entry.cause == "a run with 3 beacons"
+
+
 def test_readings_that_disagree_make_a_claim_not_comparable(table: Path):
     one, other = claim("x", {"below": 0}), claim("x", {"below": 0}, pair="c - b")
     spec = {**claim("x", {"below": 0}, cause="known"), "choice": "the truth"}
@@ -193,6 +199,7 @@ def test_not_reproduced_without_a_cause_is_refused(table: Path):
             "needs measure.test",
         ),
         ({"choice": "x", "readings": [{"reading": "A", "why": "w"}]}, "at least two readings"),
+        ({"needs": "a run"}, "'needs' names the run"),
         ({"colour": "red"}, "unknown key"),
         ({"testable": False, "why": ""}, "needs 'why'"),
     ],
