@@ -42,7 +42,27 @@ A test's p is the raw two-sided p of the job's pair, Holm-corrected here over th
 source in one job (one results file, one sweep cell), not over every pair the job computes. A test
 that cannot give p < 0.05 at its run count (the exact two-sided Wilcoxon p on n pairs is at least
 2 / 2ⁿ) is refused when the ledger is generated. Every verdict other than *reproduced* names the
-cause we found."""
+cause we found.
+
+A claim is an entry of `docs/claims/<source>.yaml` (`src/quadest/aggregate/reproductions.py` has
+every key). Read from one result:
+
+```yaml
+- claim: "HCKF is more accurate than EKF in relative position"
+  where: "§4.2, Fig. 3"
+  source_value: "HCKF > EKF"
+  command: "quadest experiment=seed004_landing hydra.run.dir=results/seed004_landing"
+  measure: {file: results/seed004_landing/paired_grouped.csv, select: {estimator: hckf, reference: mekf,
+            state: position_3d}, value: rel_diff, ci: [rel_ci_low, rel_ci_high], runs: runs, scale: 100,
+            unit: "%", p: p_wilcoxon, test: wilcoxon}
+  expect: {below: 0}        # or above, within [lo, hi], equivalent [lo, hi], contains x
+  cause: "..."              # required for every verdict but reproduced
+```
+
+Under a reconstruction choice the source does not fix, `choice` names it and `readings` lists one
+`{reading, command, measure}` per reading (or `{reading, why}` for one not run); a claim no checked-in
+run decides gives `needs` (what would decide it); one nothing here can hold, `testable: false` and
+`why`."""
 
 
 def number(x: float | None) -> str:
