@@ -6,20 +6,24 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
 
 from quadest.aggregate import reproductions as ledger
+from quadest.aggregate import verdicts
+from quadest.aggregate.reproductions_render import render_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_ledger_is_regenerated_from_the_checked_in_results():
-    """The committed ledger equals a fresh generation: a result or claim changed without the
-    ledger following (or a number typed into the ledger by hand) fails here."""
-    fresh = ledger.generate(ROOT / "docs" / "claims", ROOT)
-    assert (ROOT / "docs" / "reproductions.md").read_text(encoding="utf-8") == fresh
+    """The committed ledger and its CSV equal a fresh generation: a result or claim changed without
+    the ledger following (or a number typed into the ledger by hand) fails here."""
+    markdown, table = ledger.generate(ROOT / "docs" / "claims", ROOT)
+    assert (ROOT / "docs" / "reproductions.md").read_text(encoding="utf-8") == markdown
+    assert (ROOT / "docs" / "reproductions.csv").read_text(encoding="utf-8") == table
 
 
 def test_every_results_file_a_claim_names_is_checked_in():
@@ -47,7 +51,8 @@ def table(tmp_path: Path) -> Path:
             "rel_diff": [-0.10, 0.02, 0.30],
             "rel_ci_low": [-0.15, -0.01, 0.20],
             "rel_ci_high": [-0.05, 0.05, 0.40],
-            "p_holm": [0.01, 0.5, 0.2],
+            "p_raw": [0.01, 0.04, 0.2],
+            "runs": [40, 40, 40],
         }
     )
     (tmp_path / "results").mkdir()
@@ -63,6 +68,7 @@ def claim(state: str, expect: dict, pair: str = "a - b", **extra) -> dict:
         "ci": ["rel_ci_low", "rel_ci_high"],
         "scale": 100,
         "unit": "%",
+        "runs": "runs",
     }
     return {"claim": "c", "where": "Table 1", "source_value": "v", "command": "quadest", "measure": measure,
             "expect": expect, **extra}  # fmt: skip
@@ -71,15 +77,21 @@ def claim(state: str, expect: dict, pair: str = "a - b", **extra) -> dict:
 @pytest.mark.parametrize(
     ("state", "pair", "expect", "verdict"),
     [
-        ("x", "a - b", {"below": 0}, ledger.REPRODUCED),  # [-15, -5] % below 0
-        ("y", "a - b", {"below": 0}, ledger.NOT_REPRODUCED),  # [-1, 5] % straddles 0
-        ("x", "c - b", {"above": 10}, ledger.REPRODUCED),  # [20, 40] % above 10
-        ("x", "c - b", {"above": 25}, ledger.NOT_REPRODUCED),  # low end 20 is not above 25
-        ("y", "a - b", {"contains": 0}, ledger.REPRODUCED),
-        ("x", "a - b", {"contains": 0}, ledger.NOT_REPRODUCED),
-        ("x", "c - b", {"within": [15, 45]}, ledger.REPRODUCED),
-        ("x", "c - b", {"within": [25, 45]}, ledger.NOT_REPRODUCED),  # low end 20 outside
-        ("x", "c - b", {"within": [15, 35]}, ledger.NOT_REPRODUCED),  # high end 40 outside
+        ("x", "a - b", {"below": 0}, verdicts.REPRODUCED),  # [-15, -5] % below 0
+        ("y", "a - b", {"below": 0}, verdicts.INCONCLUSIVE),  # [-1, 5] % straddles 0
+        ("x", "c - b", {"below": 0}, verdicts.CONTRADICTED),  # [20, 40] % wholly above 0
+        ("x", "c - b", {"above": 10}, verdicts.REPRODUCED),  # [20, 40] % above 10
+        ("x", "c - b", {"above": 25}, verdicts.INCONCLUSIVE),  # low end 20 is not above 25, high 40 is
+        ("x", "a - b", {"above": 0}, verdicts.CONTRADICTED),  # [-15, -5] % wholly below 0
+        ("y", "a - b", {"contains": 0}, verdicts.REPRODUCED),
+        ("x", "a - b", {"contains": 0}, verdicts.CONTRADICTED),
+        ("x", "c - b", {"within": [15, 45]}, verdicts.REPRODUCED),
+        ("x", "c - b", {"within": [25, 45]}, verdicts.INCONCLUSIVE),  # low end 20 outside, estimate inside
+        ("x", "c - b", {"within": [15, 35]}, verdicts.INCONCLUSIVE),  # high end 40 outside
+        ("x", "c - b", {"within": [45, 60]}, verdicts.CONTRADICTED),  # wholly below the window
+        ("y", "a - b", {"equivalent": [-10, 10]}, verdicts.REPRODUCED),  # [-1, 5] inside ±10 %
+        ("y", "a - b", {"equivalent": [-1, 1]}, verdicts.INCONCLUSIVE),  # high end 5 beyond the margin
+        ("x", "c - b", {"equivalent": [-1, 1]}, verdicts.CONTRADICTED),  # [20, 40] wholly outside ±1 %
     ],
 )
 def test_verdicts_follow_the_interval(table: Path, state, pair, expect, verdict):
@@ -87,22 +99,86 @@ def test_verdicts_follow_the_interval(table: Path, state, pair, expect, verdict)
     assert entry.verdict == verdict
 
 
-@pytest.mark.parametrize(("pair", "verdict"), [("a - b", ledger.REPRODUCED), ("c - b", ledger.NOT_REPRODUCED)])
+def with_test(state: str, expect: dict, pair: str) -> dict:
+    """A claim that names the raw Wilcoxon p column of the table as its test."""
+    spec = claim(state, expect, pair=pair, cause="known")
+    spec["measure"] |= {"p": "p_raw", "test": "wilcoxon"}
+    return spec
+
+
+@pytest.mark.parametrize(("pair", "verdict"), [("a - b", verdicts.REPRODUCED), ("c - b", verdicts.INCONCLUSIVE)])
 def test_a_tested_claim_needs_its_corrected_p_below_the_level_too(table: Path, pair, verdict):
-    """With a ``p`` column the CI rule is not enough: a - b lies below 0 with Holm p 0.01 and holds;
-    c - b lies above 10 but with Holm p 0.2, as a ranking that shows no step there."""
+    """With a test the CI rule is not enough: a - b lies below 0 with p 0.01 and holds; c - b lies
+    above 10 but with p 0.2, so it is undecided (not contradicted: the CI is on the claim's side)."""
     expect = {"below": 0} if pair == "a - b" else {"above": 10}
-    entry = ledger.build_entry(claim("x", expect, pair=pair, cause="known"), table, "t")
-    assert entry.verdict == ledger.REPRODUCED
-    tested = claim("x", expect, pair=pair, cause="known")
-    tested["measure"]["p"] = "p_holm"
-    entry = ledger.build_entry(tested, table, "t")
-    assert entry.verdict == verdict and "and p < 0.05" in entry.ours
+    assert ledger.build_entry(claim("x", expect, pair=pair, cause="known"), table, "t").verdict == verdicts.REPRODUCED
+    entry = ledger.build_entry(with_test("x", expect, pair), table, "t")
+    assert entry.verdict == verdict and "Holm p < 0.05" in render_markdown([("T", [entry])])
+
+
+def test_holm_runs_over_the_sources_claims_in_a_job_not_over_every_pair(table: Path):
+    """Two claims with raw p 0.01 and 0.04 in one job: Holm gives 2 × 0.01 = 0.02 and max(0.02, 0.04)
+    = 0.04 (Holm 1979), both below 0.05, whatever the job's other pairs (c - b, p 0.2) hold. Holm over
+    the table's three rows would give 0.03 and 0.08, and the second claim would fail."""
+    first, second = with_test("x", {"below": 0}, "a - b"), with_test("y", {"above": -5}, "a - b")
+    entries = ledger.build_entries([first, second], table, "s")
+    assert [o.p for e in entries for o in e.outcomes] == pytest.approx([0.02, 0.04])
+    assert [e.verdict for e in entries] == [verdicts.REPRODUCED, verdicts.REPRODUCED]
+    alone = ledger.build_entries([second], table, "s")[0]
+    assert alone.outcomes[0].p == pytest.approx(0.04)
+
+
+def test_a_test_that_cannot_pass_at_its_run_count_is_refused(table: Path):
+    """The exact two-sided Wilcoxon p on n pairs is at least 2 / 2^n: 0.0625 on 5 pairs, never below
+    0.05; on 6 pairs (0.03125) the rule can pass and is accepted."""
+    frame = pd.read_csv(table / "results" / "paired.csv")
+    frame.assign(runs=5).to_csv(table / "results" / "paired.csv", index=False)
+    with pytest.raises(ledger.ClaimError, match=r"^t 1: .*5 runs"):
+        ledger.build_entry(with_test("x", {"below": 0}, "a - b"), table, "t")
+    frame.assign(runs=6).to_csv(table / "results" / "paired.csv", index=False)
+    assert ledger.build_entry(with_test("x", {"below": 0}, "a - b"), table, "t").verdict == verdicts.REPRODUCED
+
+
+def test_runs_needed_follow_the_half_width_scaling(table: Path):
+    """y: estimate 2 %, CI [-1, 5] % at 40 runs, rule below 0: the low end is 3 from the estimate and
+    the estimate 2 from the bound, so the CI clears 0 (from the other side) at 40 (3 / 2)^2 = 90 runs;
+    the CI already bounds any difference from 0 to 5 %."""
+    entry = ledger.build_entry(claim("y", {"below": 0}, cause="known"), table, "t")
+    assert entry.outcomes[0].decision.runs_needed == 90
+    assert entry.outcomes[0].decision.effect_bound == pytest.approx(5.0)
+
+
+def test_a_claim_no_run_decides_is_inconclusive(table: Path):
+    spec = {"claim": "c", "where": "§1", "source_value": "v", "needs": "a run with 3 beacons"}
+    entry = ledger.build_entry(spec, table, "t")
+    assert entry.verdict == verdicts.INCONCLUSIVE and entry.cause == "a run with 3 beacons"
+
+
+def test_readings_that_disagree_make_a_claim_not_comparable(table: Path):
+    one, other = claim("x", {"below": 0}), claim("x", {"below": 0}, pair="c - b")
+    spec = {**claim("x", {"below": 0}, cause="known"), "choice": "the truth"}
+    for key in ("command", "measure"):
+        spec.pop(key)
+    spec["readings"] = [{"reading": "A", "command": "q", "measure": one["measure"]},
+                        {"reading": "B", "command": "q", "measure": other["measure"]}]  # fmt: skip
+    assert ledger.build_entry(spec, table, "t").verdict == verdicts.NOT_COMPARABLE
+    spec["readings"][1] = {"reading": "B", "command": "q", "measure": one["measure"]}
+    assert ledger.build_entry(spec, table, "t").verdict == verdicts.REPRODUCED
+    spec["readings"][1] = {"reading": "B", "why": "needs a flight in the tutorial's domain"}
+    assert ledger.build_entry(spec, table, "t").verdict == verdicts.INCONCLUSIVE
+
+
+def test_a_negative_scale_keeps_the_interval_ordered(table: Path):
+    """Reading a - b (CI [-15, -5] %) as b - a with scale -100 gives 10 % [5, 15]: the ends swap with the sign."""
+    spec = claim("x", {"above": 0})
+    spec["measure"]["scale"] = -100
+    reading = ledger.build_entry(spec, table, "t").outcomes[0].reading
+    assert (reading.low, reading.value, reading.high) == pytest.approx((5.0, 10.0, 15.0))
 
 
 def test_reading_is_scaled_with_its_interval(table: Path):
     entry = ledger.build_entry(claim("x", {"below": 0}), table, "t")
-    assert entry.ours.startswith("-10 % [-15, -5]")
+    assert render_markdown([("T", [entry])]).count("-10 % [-15, -5]") == 1
 
 
 def test_not_reproduced_without_a_cause_is_refused(table: Path):
@@ -117,6 +193,13 @@ def test_not_reproduced_without_a_cause_is_refused(table: Path):
         ({"measure": {"file": "results/none.csv", "value": "rel_diff"}}, "does not exist"),
         ({"measure": {"file": "results/paired.csv", "select": {"pair": "a - b", "state": "x"}, "value": "p"}}, "p"),
         ({"expect": {"less": 0}}, "expect must be one of"),
+        ({"expect": {"within": [5, 1]}}, "low < high"),
+        (
+            {"measure": {"file": "results/paired.csv", "select": {"pair": "c - b"}, "value": "rel_diff", "p": "p_raw"}},
+            "needs measure.test",
+        ),
+        ({"choice": "x", "readings": [{"reading": "A", "why": "w"}]}, "at least two readings"),
+        ({"needs": "a run"}, "'needs' names the run"),
         ({"colour": "red"}, "unknown key"),
         ({"testable": False, "why": ""}, "needs 'why'"),
     ],
@@ -136,3 +219,12 @@ def test_check_mode_reports_a_stale_ledger(table: Path, capsys):
     (claims / "a.yaml").write_text(yaml.safe_dump({"title": "A", "claims": [claim("y", {"below": 0})]}))
     assert ledger.main(["--root", str(table)]) == 2
     assert "cause" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("runs", range(3, 11))
+def test_the_smallest_wilcoxon_p_is_scipys_exact_one(runs: int):
+    """All n differences of one sign give the exact two-sided signed-rank p its minimum, which the
+    refusal rule assumes is 2 / 2^n."""
+    from scipy.stats import wilcoxon
+
+    assert verdicts.minimum_p("wilcoxon", runs) == pytest.approx(wilcoxon(np.arange(1.0, runs + 1)).pvalue, rel=1e-12)

@@ -1,4 +1,4 @@
-"""Regenerate every checked-in result folder, then the reproductions ledger.
+"""Regenerate every checked-in result folder, then the reproductions ledger and the docs' result numbers.
 
 Usage, from the repository root (with quadest installed)::
 
@@ -9,8 +9,10 @@ Usage, from the repository root (with quadest installed)::
 Each folder is made afresh: the old folder is moved aside, the folder's commands run in order
 (they go through the result cache, so a second regeneration at the same code only reads it), and
 the old folder is deleted once every command succeeded, or put back if one failed. Afterwards
-``python -m quadest.aggregate.reproductions`` rewrites ``docs/reproductions.md`` from the new
-results. The exit status is non-zero if any command failed.
+``python -m quadest.aggregate.reproductions`` rewrites the ledger (``docs/reproductions.md`` and
+``.csv``) and ``python -m quadest.aggregate.doc_numbers`` the result numbers of ``docs/findings.md``
+and ``results/README.md`` (``docs/numbers.yaml``) from the new results. The exit status is
+non-zero if any command failed.
 """
 
 from __future__ import annotations
@@ -91,8 +93,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name}:\n" + "".join(f"  {command}\n" for command in manifest[name]), end="")
         return 0
     failed = [name for name in names if not regenerate(name, manifest[name])]
-    ledger = [sys.executable, "-m", "quadest.aggregate.reproductions"]
-    ok_ledger = subprocess.run(ledger, cwd=ROOT, check=False).returncode == 0
+    ok_ledger = all(
+        subprocess.run([sys.executable, "-m", module], cwd=ROOT, check=False).returncode == 0
+        for module in ("quadest.aggregate.reproductions", "quadest.aggregate.doc_numbers")
+    )
     if failed:
         print(f"regenerate_results: failed: {', '.join(failed)} (their old folders are back)", file=sys.stderr)
     return int(bool(failed) or not ok_ledger)

@@ -1,34 +1,38 @@
-"""The ledger of reproduced claims, ``docs/reproductions.md``, generated from the checked-in results.
+"""The ledger of reproduced claims, ``docs/reproductions.md`` and its twin ``docs/reproductions.csv``,
+generated from the checked-in results.
 
 Every claim of a seed or a published table that quadest reproduces is one entry of a claim file
 ``docs/claims/<source>.yaml``: what the source says (its own printed value, typed from the source),
-the command that made our result, and *how to read* our number from a checked-in CSV. Our numbers
-are never typed: they are read here, from ``results/``, with their 95 % confidence interval, and
-the verdict follows from the interval and the claim's ``expect`` rule:
+the command that made our result, and *how to read* our number from a checked-in CSV (``measure``:
+``file``, ``select``, ``value``, ``ci``, ``scale``, ``unit``, and optionally ``runs``, the column of
+the run count, and ``p`` with ``test``, the column of a raw two-sided test p and the test that gave
+it). Our numbers are never typed: they are read here, from ``results/``, with their 95 % confidence
+interval, and the verdict follows from the interval and the claim's rule (``expect``), five-way as
+:mod:`quadest.aggregate.verdicts` defines it: reproduced, contradicted, inconclusive, not comparable,
+not testable.
 
-- ``{below: b}``: reproduced when the whole CI lies below ``b``;
-- ``{above: b}``: reproduced when the whole CI lies above ``b``;
-- ``{within: [lo, hi]}``: reproduced when the whole CI lies inside ``[lo, hi]``;
-- ``{contains: x}``: reproduced when the CI contains ``x``.
+A claim whose verdict turns on a reconstruction choice the source does not fix names the choice
+(``choice``) and gives one entry per reading under ``readings`` (each with ``reading``, ``command``,
+``measure`` and optionally its own ``expect``; a reading we have not run gives ``why`` instead of a
+measure). Readings that disagree make the claim *not comparable*; readings that agree give their
+common verdict; a reading not run leaves the claim *inconclusive*, with the ``why`` saying what
+would decide it. A claim marked ``testable: false`` gives ``why`` and is *not testable*. Every
+verdict other than *reproduced* needs a ``cause`` (a claim file without one is an error). A claim
+that our results could decide but no checked-in run does gives ``needs`` (the run that would decide
+it) instead of a measure, and is *inconclusive*.
 
-A measure may also name a column ``p`` holding a multiplicity-corrected p-value (the Holm-corrected
-Wilcoxon p of a ranking, say): then the claim is reproduced only when, besides the CI rule,
-``p < 0.05`` (:data:`SIGNIFICANCE`), so that a ranking claim rests on the same test the ranking does.
+The tests of the claims of one source in one job (one results file, one sweep cell) are one family:
+their raw p are Holm-corrected over that family here, and a test that cannot pass at its run count
+is refused with an error naming the claim.
 
-Anything else is *not reproduced*, and then the entry must give the ``cause`` we found for the
-difference (a claim file without one is an error). A claim marked ``testable: false`` gives
-``why`` instead and is listed as *not testable here*.
-
-``python -m quadest.aggregate.reproductions`` (from the repository root) rewrites
-``docs/reproductions.md``; ``--check`` only compares and exits 1 when the file is stale.
-``tests/test_reproductions.py`` runs the check, so a regenerated result that changes a verdict
-without the ledger following fails the suite.
+``python -m quadest.aggregate.reproductions`` (from the repository root) rewrites both files;
+``--check`` only compares and exits 1 when either is stale. ``tests/test_reproductions.py`` runs the
+check, so a regenerated result that changes a verdict without the ledger following fails the suite.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,12 +40,15 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
-CLAIM_KEYS = {"claim", "where", "source_value", "command", "measure", "expect", "cause", "testable", "why"}
-MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit", "p"}
-EXPECT_KINDS = ("below", "above", "within", "contains")
-REPRODUCED, NOT_REPRODUCED, NOT_TESTABLE = "reproduced", "not reproduced", "not testable here"
-SIGNIFICANCE = 0.05
-"""The level a measure's ``p`` column must fall below for a reproduction."""
+from quadest.aggregate import verdicts as v
+from quadest.aggregate.reproductions_render import render_csv, render_markdown
+
+CLAIM_KEYS = {"claim", "where", "source_value", "command", "measure", "expect", "cause", "testable", "why",
+              "choice", "readings", "needs"}  # fmt: skip
+READING_KEYS = {"reading", "command", "measure", "expect", "why"}
+MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit", "p", "test", "runs"}
+PAIR_COLUMNS = {"pair", "estimator", "reference", "state", "arm", "metric", "step"}
+"""Select columns that name a comparison inside a job; the others (a sweep cell) name the job."""
 
 
 class ClaimError(ValueError):
@@ -56,36 +63,57 @@ class Reading:
     low: float
     high: float
     unit: str
+    p_raw: float | None = None
+    test: str | None = None
+    runs: int | None = None
+    family: tuple = ()
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One reading of a claim, decided: ``reading`` is None for a reading not run (``why`` says what would run it)."""
+
+    name: str
+    command: str
+    rule: v.Rule | None
+    reading: Reading | None
+    decision: v.Decision
     p: float | None = None
+    family_size: int = 1
+    why: str = ""
 
 
 @dataclass(frozen=True)
 class Entry:
     """One row of the ledger."""
 
+    source: str
     claim: str
     where: str
     source_value: str
-    command: str
-    ours: str
+    choice: str
+    outcomes: tuple[Outcome, ...]
     verdict: str
     cause: str
 
 
 def read_measure(measure: dict, root: Path, label: str) -> Reading:
-    """Read ``measure`` (file, select, value, ci, scale, unit) from the CSV under ``root``."""
+    """Read ``measure`` from the CSV under ``root``; a negative ``scale`` swaps the CI's ends so it stays ordered."""
     unknown = set(measure) - MEASURE_KEYS
     if unknown:
         raise ClaimError(f"{label}: unknown measure key(s) {sorted(unknown)}; allowed: {sorted(MEASURE_KEYS)}")
     for key in ("file", "value"):
         if key not in measure:
             raise ClaimError(f"{label}: measure.{key} is required")
+    if ("p" in measure) != ("test" in measure) or ("p" in measure and "runs" not in measure):
+        raise ClaimError(f"{label}: measure.p needs measure.test (one of {list(v.TESTS)}) and measure.runs")
     path = root / measure["file"]
     if not path.is_file():
         raise ClaimError(f"{label}: measure.file {measure['file']} does not exist")
     table = pd.read_csv(path)
     rows = table
-    for column, wanted in (measure.get("select") or {}).items():
+    select = measure.get("select") or {}
+    for column, wanted in select.items():
         if column not in table.columns:
             raise ClaimError(f"{label}: select column {column!r} is not in {measure['file']}")
         rows = rows[rows[column].astype(str) == str(wanted)]
@@ -94,61 +122,66 @@ def read_measure(measure: dict, root: Path, label: str) -> Reading:
     row = rows.iloc[0]
     scale = float(measure.get("scale", 1.0))
     columns = [measure["value"], *(measure.get("ci") or [measure["value"]] * 2)]
-    missing = [c for c in [*columns, *([measure["p"]] if "p" in measure else [])] if c not in table.columns]
+    extra = [measure[k] for k in ("p", "runs") if k in measure]
+    missing = [c for c in [*columns, *extra] if c not in table.columns]
     if missing:
         raise ClaimError(f"{label}: column(s) {missing} are not in {measure['file']}")
     value, low, high = (float(row[c]) * scale for c in columns)
     if scale < 0:
         low, high = high, low
-    p = float(row[measure["p"]]) if "p" in measure else None
-    return Reading(value, low, high, str(measure.get("unit", "")), p)
+    runs = int(row[measure["runs"]]) if "runs" in measure else None
+    family = (measure["file"], *sorted((k, str(w)) for k, w in select.items() if k not in PAIR_COLUMNS))
+    p_raw = float(row[measure["p"]]) if "p" in measure else None
+    return Reading(value, low, high, str(measure.get("unit", "")), p_raw, measure.get("test"), runs, family)
 
 
-def verdict(reading: Reading, expect: dict, label: str) -> str:
-    """:data:`REPRODUCED` when the CI satisfies ``expect`` (see the module docstring), else
-    :data:`NOT_REPRODUCED`; a CI with a NaN end is never a reproduction."""
-    if len(expect) != 1 or next(iter(expect)) not in EXPECT_KINDS:
-        raise ClaimError(f"{label}: expect must be one of {{{', '.join(EXPECT_KINDS)}}}, got {expect}")
-    (kind, bound), low, high = next(iter(expect.items())), reading.low, reading.high
-    if kind == "below":
-        holds = high < float(bound)
-    elif kind == "above":
-        holds = low > float(bound)
-    elif kind == "within":
-        holds = float(bound[0]) <= low and high <= float(bound[1])
-    else:
-        holds = low <= float(bound) <= high
-    if reading.p is not None:
-        holds = holds and reading.p < SIGNIFICANCE
-    return REPRODUCED if holds else NOT_REPRODUCED
+def _rule(expect: object, label: str) -> v.Rule:
+    try:
+        return v.Rule.parse(expect)
+    except v.RuleError as error:
+        raise ClaimError(f"{label}: {error}") from None
 
 
-def format_number(x: float) -> str:
-    """Three significant digits, as the tables of the job outputs."""
-    if math.isnan(x):
-        return "nan"
-    return f"{x:.3g}"
+def _readings(claim: dict, label: str) -> list[dict]:
+    """The claim's readings, each with its command, measure (or why) and expect."""
+    if "readings" not in claim:
+        for key in ("command", "measure", "expect"):
+            if key not in claim:
+                raise ClaimError(f"{label}: '{key}' is required (or testable: false with 'why')")
+        return [{"reading": "", "command": claim["command"], "measure": claim["measure"], "expect": claim["expect"]}]
+    if (
+        not str(claim.get("choice", "")).strip()
+        or not isinstance(claim["readings"], list)
+        or len(claim["readings"]) < 2
+    ):
+        raise ClaimError(f"{label}: 'readings' needs a 'choice' and at least two readings")
+    out = []
+    for i, reading in enumerate(claim["readings"]):
+        unknown = set(reading) - READING_KEYS
+        if unknown:
+            raise ClaimError(
+                f"{label} reading {i + 1}: unknown key(s) {sorted(unknown)}; allowed: {sorted(READING_KEYS)}"
+            )
+        if not str(reading.get("reading", "")).strip() or ("measure" in reading) == ("why" in reading):
+            raise ClaimError(f"{label} reading {i + 1}: needs 'reading' and either 'command' + 'measure' or 'why'")
+        if "measure" in reading and "command" not in reading:
+            raise ClaimError(f"{label} reading {i + 1}: 'command' is required with 'measure'")
+        if "measure" in reading and "expect" not in reading and "expect" not in claim:
+            raise ClaimError(f"{label} reading {i + 1}: 'expect' is required (here or on the claim)")
+        out.append({"expect": claim.get("expect"), **reading})
+    return out
 
 
-def format_reading(reading: Reading) -> str:
-    unit = f" {reading.unit}" if reading.unit else ""
-    p = "" if reading.p is None else f", p = {format_number(reading.p)}"
-    if reading.low == reading.high == reading.value:
-        return f"{format_number(reading.value)}{unit}{p}"
-    return f"{format_number(reading.value)}{unit} [{format_number(reading.low)}, {format_number(reading.high)}]{p}"
+@dataclass(frozen=True)
+class _Pending:
+    """A claim read but not yet decided (its tests' Holm correction needs the whole family)."""
+
+    label: str
+    claim: dict
+    readings: list[tuple[dict, v.Rule | None, Reading | None]]
 
 
-def expectation_text(expect: dict, tested: bool = False) -> str:
-    kind, bound = next(iter(expect.items()))
-    if kind == "within":
-        text = f"CI within [{bound[0]}, {bound[1]}]"
-    else:
-        text = {"below": "CI below {}", "above": "CI above {}", "contains": "CI contains {}"}[kind].format(bound)
-    return f"{text} and p < {SIGNIFICANCE}" if tested else text
-
-
-def build_entry(claim: dict, root: Path, label: str) -> Entry:
-    """Read one claim into a ledger row (our number, verdict and the cause of any difference)."""
+def _read_claim(claim: dict, root: Path, label: str) -> _Pending:
     unknown = set(claim) - CLAIM_KEYS
     if unknown:
         raise ClaimError(f"{label}: unknown key(s) {sorted(unknown)}; allowed: {sorted(CLAIM_KEYS)}")
@@ -158,17 +191,88 @@ def build_entry(claim: dict, root: Path, label: str) -> Entry:
     if claim.get("testable", True) is False:
         if not str(claim.get("why", "")).strip():
             raise ClaimError(f"{label}: a claim with testable: false needs 'why'")
-        return Entry(claim["claim"], claim["where"], str(claim["source_value"]), "-", "-", NOT_TESTABLE, claim["why"])
-    for key in ("command", "measure", "expect"):
-        if key not in claim:
-            raise ClaimError(f"{label}: '{key}' is required (or testable: false with 'why')")
-    reading = read_measure(claim["measure"], root, label)
-    result = verdict(reading, claim["expect"], label)
-    cause = str(claim.get("cause", "")).strip()
-    if result != REPRODUCED and not cause:
-        raise ClaimError(f"{label}: not reproduced ({format_reading(reading)}), so 'cause' is required")
-    ours = f"{format_reading(reading)}; reproduced if {expectation_text(claim['expect'], reading.p is not None)}"
-    return Entry(claim["claim"], claim["where"], str(claim["source_value"]), claim["command"], ours, result, cause)
+        return _Pending(label, claim, [])
+    if "needs" in claim:
+        if not str(claim["needs"]).strip() or {"command", "measure", "readings"} & set(claim):
+            raise ClaimError(f"{label}: 'needs' names the run that would decide the claim, without a measure")
+        return _Pending(label, claim, [])
+    readings = []
+    for spec in _readings(claim, label):
+        if "measure" not in spec:
+            readings.append((spec, None, None))
+            continue
+        readings.append((spec, _rule(spec["expect"], label), read_measure(spec["measure"], root, label)))
+    return _Pending(label, claim, readings)
+
+
+def _families(pending: list[_Pending]) -> dict[tuple, list[tuple[str, Reading]]]:
+    """The tested readings of one source, grouped by job (results file and sweep cell)."""
+    families: dict[tuple, list[tuple[str, Reading]]] = {}
+    for item in pending:
+        for _, _, reading in item.readings:
+            if reading is not None and reading.p_raw is not None:
+                families.setdefault(reading.family, []).append((item.label, reading))
+    return families
+
+
+def _corrected(pending: list[_Pending]) -> dict[int, tuple[float, int]]:
+    """Holm p and family size per tested reading (keyed by ``id`` of the reading); refuses a test
+    that cannot pass at its run count."""
+    out: dict[int, tuple[float, int]] = {}
+    for members in _families(pending).values():
+        size = len(members)
+        floor = min(v.minimum_p(r.test, r.runs) for _, r in members)
+        for label, reading in members:
+            try:
+                v.check_attainable(reading.test, reading.runs, floor, size)
+            except v.RuleError as error:
+                raise ClaimError(f"{label}: {error}") from None
+        for (_, reading), p in zip(members, v.holm_over_claims([r.p_raw for _, r in members]), strict=True):
+            out[id(reading)] = (p, size)
+    return out
+
+
+def _decide(item: _Pending, corrected: dict[int, tuple[float, int]], source: str) -> Entry:
+    claim = item.claim
+    base = dict(source=source, claim=claim["claim"], where=claim["where"], source_value=str(claim["source_value"]),
+                choice=str(claim.get("choice", "")).strip())  # fmt: skip
+    if "needs" in claim:
+        return Entry(**base, outcomes=(), verdict=v.INCONCLUSIVE, cause=" ".join(str(claim["needs"]).split()))
+    if not item.readings:
+        return Entry(**base, outcomes=(), verdict=v.NOT_TESTABLE, cause=" ".join(str(claim["why"]).split()))
+    outcomes = []
+    for spec, rule, reading in item.readings:
+        if reading is None:
+            outcome = Outcome(spec["reading"], "-", None, None, v.Decision(v.INCONCLUSIVE), why=str(spec["why"]))
+        else:
+            p, size = corrected.get(id(reading), (None, 1))
+            decision = v.decide(reading.value, reading.low, reading.high, rule, p=p, p_raw=reading.p_raw,
+                                family=size, runs=reading.runs)  # fmt: skip
+            outcome = Outcome(spec["reading"], spec["command"], rule, reading, decision, p, size)
+        outcomes.append(outcome)
+    run = {o.decision.verdict for o in outcomes if o.reading is not None}
+    if len(run) > 1:
+        verdict = v.NOT_COMPARABLE
+    elif any(o.reading is None for o in outcomes):
+        verdict = v.INCONCLUSIVE
+    else:
+        verdict = run.pop()
+    cause = " ".join(str(claim.get("cause", "")).split())
+    if verdict != v.REPRODUCED and not cause:
+        raise ClaimError(f"{item.label}: {verdict}, so 'cause' is required")
+    return Entry(**base, outcomes=tuple(outcomes), verdict=verdict, cause=cause)
+
+
+def build_entries(claims: list[dict], root: Path, source: str, label: str = "claim") -> list[Entry]:
+    """The ledger rows of one source's claims (Holm runs over their tests, job by job)."""
+    pending = [_read_claim(claim, root, f"{label} {i + 1}") for i, claim in enumerate(claims)]
+    corrected = _corrected(pending)
+    return [_decide(item, corrected, source) for item in pending]
+
+
+def build_entry(claim: dict, root: Path, label: str) -> Entry:
+    """One claim alone (a family of one), as :func:`build_entries` would decide it."""
+    return build_entries([claim], root, "test", label)[0]
 
 
 def read_claim_file(path: Path, root: Path) -> tuple[str, list[Entry]]:
@@ -176,48 +280,17 @@ def read_claim_file(path: Path, root: Path) -> tuple[str, list[Entry]]:
     spec = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
     if not spec.get("title") or not spec.get("claims"):
         raise ClaimError(f"{path.name}: needs 'title' and a non-empty 'claims' list")
-    entries = [build_entry(claim, root, f"{path.name} claim {i + 1}") for i, claim in enumerate(spec["claims"])]
-    return spec["title"], entries
+    return spec["title"], build_entries(spec["claims"], root, spec.get("source", path.stem), f"{path.name} claim")
 
 
-def cell(text: str) -> str:
-    """A Markdown table cell: one line, pipes escaped."""
-    return " ".join(str(text).split()).replace("|", "\\|")
-
-
-def render(sections: list[tuple[str, list[Entry]]]) -> str:
-    """The whole ``docs/reproductions.md``."""
-    counts = {
-        v: sum(e.verdict == v for _, es in sections for e in es) for v in (REPRODUCED, NOT_REPRODUCED, NOT_TESTABLE)
-    }
-    lines = [
-        "# Reproductions: every claim of a seed or a published table, and what our results say",
-        "",
-        "Generated by `python -m quadest.aggregate.reproductions` from the claim files in `docs/claims/` and",
-        "the checked-in results; do not edit by hand (`tests/test_reproductions.py` regenerates and compares).",
-        "The source's value is typed from the source; ours is read from the named results file, as the",
-        "estimate with its 95 % confidence interval, and the verdict follows from the interval and the rule",
-        "shown. Every verdict other than *reproduced* names the cause we found for the difference.",
-        "",
-        f"{sum(counts.values())} claims: {counts[REPRODUCED]} reproduced, {counts[NOT_REPRODUCED]} not reproduced, "
-        f"{counts[NOT_TESTABLE]} not testable here.",
-    ]
-    header = "| claim | where | the source says | our command | ours (95 % CI) | verdict | cause of the difference |"
-    for title, entries in sections:
-        lines += ["", f"## {title}", "", header, "|---|---|---|---|---|---|---|"]
-        for e in entries:
-            command = f"`{e.command}`" if e.command != "-" else "-"
-            row = (e.claim, e.where, e.source_value, command, e.ours, f"**{e.verdict}**", e.cause or "-")
-            lines.append("| " + " | ".join(cell(x) for x in row) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def generate(claims_dir: Path, root: Path) -> str:
-    """The ledger from every ``*.yaml`` in ``claims_dir`` (sorted by file name) and the results under ``root``."""
+def generate(claims_dir: Path, root: Path) -> tuple[str, str]:
+    """The ledger (Markdown, CSV) from every ``*.yaml`` in ``claims_dir`` (sorted by file name) and the
+    results under ``root``."""
     files = sorted(claims_dir.glob("*.yaml"))
     if not files:
         raise ClaimError(f"no claim files in {claims_dir}")
-    return render([read_claim_file(path, root) for path in files])
+    sections = [read_claim_file(path, root) for path in files]
+    return render_markdown(sections), render_csv(sections)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -227,18 +300,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--root", type=Path, default=Path("."), help="the repository root (default: .)")
     parser.add_argument("--check", action="store_true", help="only compare with the ledger on disk; exit 1 if stale")
     args = parser.parse_args(argv)
-    target = args.root / "docs" / "reproductions.md"
+    targets = (args.root / "docs" / "reproductions.md", args.root / "docs" / "reproductions.csv")
     try:
-        text = generate(args.root / "docs" / "claims", args.root)
+        texts = generate(args.root / "docs" / "claims", args.root)
     except ClaimError as error:
         print(f"reproductions: error: {error}", file=sys.stderr)
         return 2
     if args.check:
-        stale = not target.is_file() or target.read_text(encoding="utf-8") != text
-        print(f"reproductions: {target} is {'stale' if stale else 'up to date'}")
-        return int(stale)
-    target.write_text(text, encoding="utf-8")
-    print(f"reproductions: wrote {target}")
+        stale = [t for t, text in zip(targets, texts, strict=True)
+                 if not t.is_file() or t.read_text(encoding="utf-8") != text]  # fmt: skip
+        print(f"reproductions: {', '.join(map(str, stale)) or 'the ledger'} {'stale' if stale else 'up to date'}")
+        return int(bool(stale))
+    for target, text in zip(targets, texts, strict=True):
+        target.write_text(text, encoding="utf-8")
+        print(f"reproductions: wrote {target}")
     return 0
 
 
