@@ -39,6 +39,7 @@ SMALL = {
     "ins": ["experiment=ins_figure8", "duration=0.2"],
     "seed001_rates": ["experiment=seed001_rates", "duration=0.2"],
     "upf_benchmark": ["model=upf_benchmark", "duration=2", "sample_period=1"],
+    "seed003_attitude": ["model=seed003_attitude", "scenario=attitude_steps", "estimator=[ekf]", "duration=0.2"],
 }
 
 
