@@ -184,11 +184,11 @@ def decisions_text(table: pd.DataFrame, rules: DecisionConf, runs: int) -> str:
     head = (
         f"Decisions (runs=auto, decisions.csv): {runs} of at most {rules.max_runs} runs, looks every {rules.batch}; "
         f"estimator - reference in % of the reference, interval at the deciding look's spent alpha "
-        f"(family level {1 - rules.alpha:g}), equivalent within +-{rules.margin:g} %: "
+        f"(each comparison at level {1 - rules.alpha:g} over all looks), equivalent within +-{rules.margin:g} %: "
         + ", ".join(f"{v} {n}" for v, n in counts.items())
     )
     cells = [
-        f"{e:+.3g} [{lo:+.3g}, {hi:+.3g}]"
+        "n/a (fewer than 2 usable runs)" if np.isnan(e) else f"{e:+.3g} [{lo:+.3g}, {hi:+.3g}]"
         for e, lo, hi in zip(table["estimate"], table["ci_low"], table["ci_high"], strict=True)
     ]
     rows = table.assign(**{"estimate [interval] %": cells})[
