@@ -134,7 +134,8 @@ def _run_batch(job: JobSettings, cfg: DictConfig, first_run: int, batches: list[
                           "(its batches would repeat the same runs; docs/models.md)")  # fmt: skip
     settings = run_settings(batch_job, batch)
     results, from_cache = run_estimators(kind.work(data), exp.estimator, cache, settings, int(exp.workers))
-    batches.append(Ran(data, data_from_cache, results, from_cache, cache.derived))
+    kept = data if not batches else None  # only the first batch's data is reported: the others are let go
+    batches.append(Ran(kept, data_from_cache, results, from_cache, cache.derived))
     merged = [concatenate_results([b.results[i] for b in batches]) for i in range(len(results))]
     params = {label: estimator_parameters(node) for label, node in exp.estimator.items()}
     with warnings.catch_warnings():
