@@ -64,6 +64,8 @@ PARTICLE_KERNELS = "tests/test_particle_kernels.py::"
 STEPS = "tests/test_gaussian_steps.py::"
 SMOOTHERS = "tests/test_smoothers.py::"
 SMOOTHING_RUNS = "tests/test_smoothing_runs.py::"
+SEQUENTIAL = "tests/test_sequential.py::"
+SEQUENTIAL_RUNS = "tests/test_sequential_runs.py::"
 
 MUTATIONS = (
     Mutation(
@@ -592,8 +594,8 @@ MUTATIONS = (
     Mutation(
         "every plugin sensor draws from one shared stream",
         "src/quadest/simulation/aiding.py",
-        'named_streams(seed, runs, f"sensor:{name}:{s}")',
-        'named_streams(seed, runs, "sensor")',
+        'named_streams(seed, runs, f"sensor:{name}:{s}", first_run)',
+        'named_streams(seed, runs, "sensor", first_run)',
         ("tests/test_sensor_plugins.py::test_the_rangefinder_measures_the_height_from_its_own_stream",),
     ),
     Mutation(
@@ -666,6 +668,25 @@ MUTATIONS = (
         "    value = values[0] if reduce is None else REDUCERS[reduce](values)",
         "    value = values[0]",
         ("tests/test_doc_numbers.py::test_ranges_scales_and_signs",),
+        "runs=auto looks with a fixed 95 % interval at every look (no alpha-spending)",
+        "src/quadest/evaluation/sequential.py",
+        "    return np.diff(np.concatenate([[0.0], spent]))\n",
+        "    return np.full(spent.shape, alpha)\n",
+        (SEQUENTIAL + "test_no_effect_decides_a_sign_in_at_most_alpha_of_repetitions",),
+    ),
+    Mutation(
+        "a runs=auto batch made from runs 0.. again",
+        "src/quadest/montecarlo/streams.py",
+        "for i in range(first_run, first_run + runs)]\n    per_run",
+        "for i in range(runs)]\n    per_run",
+        (SEQUENTIAL_RUNS + "test_the_first_fifty_runs_of_a_hundred_run_job_are_the_fifty_run_job",),
+    ),
+    Mutation(
+        "runs=auto goes on after every comparison is decided",
+        "src/quadest/app/sequential_runs.py",
+        "        if decisions.settled:\n            break\n",
+        "",
+        (SEQUENTIAL + "test_the_job_stops_at_the_first_look_where_every_comparison_is_decided",),
     ),
 )  # fmt: skip
 

@@ -80,7 +80,7 @@ def build_pendulum_data(settings: DataSettings):
     m, runs, K = settings.model, int(settings.runs), sample_count(settings.duration, settings.sample_period)
     P0 = np.diag(np.square(np.array(m.initial_std, dtype=float)))
     x0 = np.broadcast_to(np.array(m.initial_state, dtype=float), (runs, 2))
-    estimates = draw_initial_estimates(x0, P0, run_streams(int(settings.seed), runs)["initial"])
+    estimates = draw_initial_estimates(x0, P0, run_streams(int(settings.seed), runs, settings.first_run)["initial"])
     model = PendulumModel(m, settings.sample_period, runs)
     return data_from_filter_model(settings, model, x0, estimates, P0, np.zeros((runs, K + 1, 0)))
 

@@ -68,10 +68,11 @@ def _main(cfg: DictConfig) -> float | None:
             raise
         _record_failure(out_dir, f"{type(exc).__name__}: {exc}")
         return failed
+    runs = summary.get("labels", {}).get("runs", cfg.runs)  # runs=auto: the runs it made
     print(
         f"\n{summary['_caption']}"  # a flight-log replay (docs/replay.md)
         if "_caption" in summary
-        else f"\nPer-state RMSE, mean ± std over {cfg.runs} Monte Carlo runs (per-run RMSE over time; diverged runs "
+        else f"\nPer-state RMSE, mean ± std over {runs} Monte Carlo runs (per-run RMSE over time; diverged runs "
         f"excluded).\n{pcrlb_caption(cfg.model.name, smoothed=has_smoother(cfg))}"
     )
     print(summary["_table"].to_string(index=False))
@@ -85,7 +86,7 @@ def _main(cfg: DictConfig) -> float | None:
             if m
             else "NIS per sensor " + ", ".join(f"{s} {_fmt(v)}" for s, v in est.get("nis_by_sensor", {}).items())
         )
-        print(f"  {name:>8s}: {est['diverged']} of {cfg.runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
+        print(f"  {name:>8s}: {est['diverged']} of {runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
               f"({n} dof, {_pct(est['nees_in_band'])} of steps in the 95% band), {nis}, "
               f"{_fmt(est['step_time_us'], 1)} us/step/run"
               f"{' (from the cache)' if est['from_cache'] else ''}")  # fmt: skip

@@ -16,6 +16,8 @@ from quadest.app.closed_loop_job import ClosedLoopJob
 from quadest.app.open_loop_job import OpenLoopJob
 from quadest.app.pipeline import JobKind, run_pipeline
 from quadest.app.replay_job import ReplayJob
+from quadest.app.schema import is_auto
+from quadest.app.sequential_runs import run_until_decided
 from quadest.app.settings import JobSettings
 from quadest.app.validate import validate
 
@@ -45,4 +47,6 @@ def run_job(cfg: DictConfig, out_dir: Path, overrides: list[str] | None = None) 
 
 def run_validated(cfg: DictConfig, settings: JobSettings, out_dir: Path, overrides: list[str] | None = None) -> dict:
     """:func:`run_job` of a config already validated into ``settings`` (:func:`~quadest.app.validate.validate`)."""
+    if is_auto(settings.experiment.runs):
+        return run_until_decided(settings, cfg, out_dir, overrides)
     return run_pipeline(job_kind(settings), settings, cfg, out_dir, overrides)

@@ -120,19 +120,51 @@ def run_pipeline(
     Returns the JSON summary, with the printed table (``_table``), the paired lines (``_paired``)
     and, where the kind has them, the caption (``_caption``) and the text below the table
     (``_after_table``) for the CLI."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+    out_dir = start_job(cfg, out_dir)
     exp = job.experiment
     cache = JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)
     data, data_from_cache = cache.data(kind.make_data) if kind.caches_data else (kind.make_data(), False)
+    settings = run_settings(job, int(exp.runs))
+    results, from_cache = run_estimators(kind.work(data), exp.estimator, cache, settings, int(exp.workers))
+    return finish_job(kind, job, out_dir, overrides, Ran(data, data_from_cache, results, from_cache, cache.derived))
+
+
+def start_job(cfg: DictConfig, out_dir: Path) -> Path:
+    """Make ``out_dir`` and write ``config.yaml`` (the resolved config): the first thing a job does."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+    return out_dir
+
+
+def run_settings(job: JobSettings, runs: int) -> RunSettings:
+    """The runner settings of a job of ``runs`` runs (the saved runs are at most ``runs``)."""
+    exp = job.experiment
+    return RunSettings(float(exp.divergence_bound), min(int(exp.output.saved_runs), runs), bool(exp.progress))
+
+
+@dataclass
+class Ran:
+    """What a job computed (or found in the cache) before its report: its data, each estimator's
+    result (in the job's order) and where each came from, and the cache of values derived from
+    the data (:attr:`Finished.derived`)."""
+
+    data: Any
+    data_from_cache: bool
+    results: list[EstimatorResult]
+    from_cache: dict[str, bool]
+    derived: Callable[[str, Callable[[], Any]], Any]
+
+
+def finish_job(kind: JobKind, job: JobSettings, out_dir: Path, overrides: list[str] | None, ran: Ran) -> dict:
+    """The report of a job that has run (:func:`run_pipeline`): the tables, ``timeseries.npz`` and
+    ``summary.json`` written, the summary returned with its printed parts."""
+    exp = job.experiment
     nodes = exp.estimator
     params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
-    settings = RunSettings(float(exp.divergence_bound), min(int(exp.output.saved_runs), int(exp.runs)),
-                           bool(exp.progress))  # fmt: skip
-    results, from_cache = run_estimators(kind.work(data), nodes, cache, settings, int(exp.workers))
-    rows = table_rows(results, params, from_cache)
-    report = kind.report(Finished(out_dir, data, results, rows, settings.saved_runs, cache.derived))
+    saved_runs = run_settings(job, int(exp.runs)).saved_runs
+    rows = table_rows(ran.results, params, ran.from_cache)
+    report = kind.report(Finished(out_dir, ran.data, ran.results, rows, saved_runs, ran.derived))
     write_tables(out_dir, with_cache_column(report.tables, rows.from_cache))
     if report.series:
         np.savez_compressed(out_dir / "timeseries.npz", **report.series)
@@ -142,7 +174,7 @@ def run_pipeline(
         **provenance(),
         "overrides": list(overrides or []),
         **report.fields,
-        "cache": {"enabled": bool(exp.cache.enabled), "data_from_cache": data_from_cache},
+        "cache": {"enabled": bool(exp.cache.enabled), "data_from_cache": ran.data_from_cache},
         "estimators": estimator_entries(rows.results, report.tables, rows.params, rows.from_cache),
     }
     write_summary(out_dir, summary)

@@ -73,11 +73,35 @@ class OutputConf:
     per_estimator_figures: bool = False
 
 
+AUTO = "auto"
+"""The value of ``runs`` that runs until every comparison decides (:class:`DecisionConf`)."""
+
+
+def is_auto(runs: int | str) -> bool:
+    """Whether ``runs`` asks for a job that runs until its comparisons decide."""
+    return isinstance(runs, str) and runs == AUTO
+
+
+@dataclass
+class DecisionConf:
+    """How a ``runs=auto`` job decides its comparisons (:mod:`quadest.app.sequential_runs`,
+    docs/experiments.md): runs added ``batch`` at a time up to ``max_runs`` (a multiple of
+    ``batch``), intervals with α-spending at family level ``1 − alpha``, *equivalent* inside
+    ``±margin`` %, and the comparisons ``pairs`` (``"estimator - reference"``; ``None``: every
+    estimator against the first)."""
+
+    batch: int = 50
+    max_runs: int = 500
+    alpha: float = 0.05
+    margin: float = 1.0
+    pairs: list[str] | None = None
+
+
 @dataclass
 class ExperimentConf:
     """The root config: Monte Carlo settings plus the four groups."""
 
-    runs: int = 50
+    runs: int | str = 50  # or "auto": add runs until every comparison decides (``decision``)
     seed: int = 2026
     duration: float = 20.0
     sample_period: float = 0.01
@@ -95,6 +119,7 @@ class ExperimentConf:
     loop: str = "open"  # open | truth | measured | estimate: what the controller flies on (docs/closed-loop.md)
     closed_loop: ClosedLoopConf = field(default_factory=ClosedLoopConf)
     source: SourceConf | None = None  # a flight log instead of the simulation (conf/experiment/px4_replay.yaml)
+    decision: DecisionConf = field(default_factory=DecisionConf)
 
 
 def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:

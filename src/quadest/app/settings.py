@@ -25,7 +25,7 @@ from typing import Any
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
-from quadest.app.schema import ExperimentConf, SensorConf
+from quadest.app.schema import ExperimentConf, SensorConf, is_auto
 from quadest.cache.keys import module_digest, plugin_digest, resolved_data_key
 from quadest.config.settings import DataSettings
 from quadest.sensors.base import Sensor
@@ -78,7 +78,7 @@ def _data_settings(experiment: ExperimentConf, aiding: dict[str, Any]) -> DataSe
         # not pickle into worker processes; those sensors' settings are in ``aiding``
         sensor = SensorConf(**{f.name: getattr(sensor, f.name) for f in dataclasses.fields(SensorConf)})
     return DataSettings(
-        runs=experiment.runs,
+        runs=experiment.decision.batch if is_auto(experiment.runs) else experiment.runs,  # runs=auto: a batch
         seed=experiment.seed,
         duration=experiment.duration,
         sample_period=experiment.sample_period,
@@ -116,10 +116,22 @@ def data_key(cfg: DictConfig) -> str | None:
     """Key of the Monte Carlo data of job config ``cfg`` (:func:`quadest.cache.keys.resolved_data_key`
     of the resolved config and of the source of the model and sensor plugins it uses); ``None``, so
     that the job is not cached, when a plugin's source cannot be read."""
+    return _data_key(cfg, {})
+
+
+def batch_data_key(cfg: DictConfig, runs: int, first_run: int) -> str | None:
+    """:func:`data_key` of the batch of ``runs`` runs from run ``first_run`` on of a ``runs=auto``
+    job ``cfg``: the key of the job with ``runs`` runs, plus ``first_run`` when it is not 0, so
+    that the first batch is the job of ``runs`` runs (docs/cache.md)."""
+    return _data_key(cfg, {"runs": int(runs), **({"first_run": int(first_run)} if first_run else {})})
+
+
+def _data_key(cfg: DictConfig, replaced: dict[str, Any]) -> str | None:
     plugins = plugin_digests(cfg)
     if any(digest is None for digest in plugins.values()):
         return None
-    return resolved_data_key(OmegaConf.to_container(cfg, resolve=True), {k: v for k, v in plugins.items() if v})
+    resolved = {**OmegaConf.to_container(cfg, resolve=True), **replaced}
+    return resolved_data_key(resolved, {k: v for k, v in plugins.items() if v})
 
 
 def plugin_digests(cfg: DictConfig) -> dict[str, str | None]:

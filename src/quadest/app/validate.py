@@ -13,6 +13,7 @@ import dataclasses
 from omegaconf import DictConfig
 
 from quadest.app.schema import ExperimentConf, check_known_keys
+from quadest.app.sequential_runs import validate_runs
 from quadest.app.settings import JobSettings, job_settings
 from quadest.cache.location import validate_cache
 from quadest.config.ranges import require_non_negative, require_positive
@@ -31,7 +32,7 @@ from quadest.simulation.registry import model_spec, state_dimension
 
 
 def validate_run(experiment: ExperimentConf) -> None:
-    require_positive("runs", experiment.runs, "must be an integer >= 1")
+    validate_runs(experiment)  # runs=auto and decision.*
     if experiment.seed < 0:
         raise ConfigError("seed", experiment.seed, "must be an integer >= 0")
     require_positive("sample_period", experiment.sample_period, "must be > 0 seconds")

@@ -40,6 +40,9 @@ class DataSettings:
         aiding: each sensor of ``model.aiding`` (registered ones) → an instance of its ``Settings``
             from its settings node (``sensor.<name>`` or its ``settings_key``), ``None`` if the
             config has no such node.
+        first_run: the index of the first run: the data of runs ``first_run .. first_run + runs − 1``,
+            each from its own streams (:func:`quadest.montecarlo.streams.run_streams`), so the
+            batches of a ``runs=auto`` job are the runs of one long job (0 for every other job).
     """
 
     runs: int
@@ -53,3 +56,4 @@ class DataSettings:
     closed_loop: ClosedLoopConf = field(default_factory=ClosedLoopConf)
     source: Any = None
     aiding: dict[str, Any] = field(default_factory=dict)
+    first_run: int = 0

@@ -88,14 +88,43 @@ def _p_values(d: np.ndarray) -> tuple[float, float]:
         return float(stats.wilcoxon(d).pvalue), float(stats.ttest_1samp(d, 0.0).pvalue)
 
 
-def _compare(wide: dict[str, pd.DataFrame], name: str, ref_name: str, seed: int, resamples: int) -> list[dict]:
-    """Rows of the pair ``name - ref_name``, one per state; ``wide`` maps each estimator to its
-    run × state RMSE table with a ``diverged`` column."""
+def paired_runs(wide: dict[str, pd.DataFrame], name: str, ref_name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The per-run RMSEs (runs, states) of estimator ``name`` and of reference ``ref_name`` over
+    the runs that diverged in neither, and the mask of those runs; ``wide`` as :func:`rmse_by_run`
+    gives it."""
     est, ref = wide[name], wide[ref_name]
     states = [c for c in ref.columns if c != "diverged"]
     usable = ~(est["diverged"].to_numpy() | ref["diverged"].to_numpy())
-    a, b = est[states].to_numpy()[usable], ref[states].to_numpy()[usable]  # (runs, states)
-    d = np.where(np.abs(a - b) <= ROUND_OFF * np.abs(b), 0.0, a - b)
+    return est[states].to_numpy()[usable], ref[states].to_numpy()[usable], usable
+
+
+def paired_differences(estimator: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``estimator − reference`` per run, zero where it is below :data:`ROUND_OFF` times the
+    reference (module docstring: round-off)."""
+    d = estimator - reference
+    return np.where(np.abs(d) <= ROUND_OFF * np.abs(reference), 0.0, d)
+
+
+def rmse_by_run(metrics: pd.DataFrame) -> tuple[list[str], pd.DataFrame, dict[str, pd.DataFrame]]:
+    """The estimators of a tidy metrics table (in its order), its states (``state``, ``unit``,
+    ``quantity``) and each estimator's run × state RMSE table with a ``diverged`` column."""
+    names = list(dict.fromkeys(metrics["estimator"]))
+    states = metrics.drop_duplicates("state")[["state", "unit", "quantity"]]
+    wide = {}
+    for name in names:
+        sub = metrics[metrics["estimator"] == name]
+        table = sub.pivot(index="run", columns="state", values="rmse")[list(states["state"])]
+        table["diverged"] = sub.groupby("run")["diverged"].any().astype(bool)
+        wide[name] = table
+    return names, states, wide
+
+
+def _compare(wide: dict[str, pd.DataFrame], name: str, ref_name: str, seed: int, resamples: int) -> list[dict]:
+    """Rows of the pair ``name - ref_name``, one per state; ``wide`` maps each estimator to its
+    run × state RMSE table with a ``diverged`` column."""
+    states = [c for c in wide[ref_name].columns if c != "diverged"]
+    a, b, usable = paired_runs(wide, name, ref_name)
+    d = paired_differences(a, b)
     n = d.shape[0]
     tail = (1.0 - CONFIDENCE) / 2.0
     if n >= 2:
@@ -138,14 +167,7 @@ def paired_comparison(metrics: pd.DataFrame, seed: int, resamples: int = RESAMPL
         One row per pair × state with the columns :data:`COLUMNS`; Holm's adjustment runs over
         all rows.
     """
-    names = list(dict.fromkeys(metrics["estimator"]))
-    states = metrics.drop_duplicates("state")[["state", "unit", "quantity"]]
-    wide = {}
-    for name in names:
-        sub = metrics[metrics["estimator"] == name]
-        table = sub.pivot(index="run", columns="state", values="rmse")[list(states["state"])]
-        table["diverged"] = sub.groupby("run")["diverged"].any().astype(bool)
-        wide[name] = table
+    names, states, wide = rmse_by_run(metrics)
     rows = [row for ref, est in itertools.combinations(names, 2) for row in _compare(wide, est, ref, seed, resamples)]
     if not rows:
         return pd.DataFrame(columns=list(COLUMNS))

@@ -42,27 +42,35 @@ STREAMS = (
 )  # append only: existing streams keep their draws
 
 
-def run_seed_sequences(seed: int, runs: int) -> dict[str, list[np.random.SeedSequence]]:
-    """One seed sequence per (purpose, run), all from ``SeedSequence(seed)``."""
-    per_run = [child.spawn(len(STREAMS)) for child in np.random.SeedSequence(seed).spawn(runs)]
+def run_seed_sequences(seed: int, runs: int, first_run: int = 0) -> dict[str, list[np.random.SeedSequence]]:
+    """One seed sequence per (purpose, run) of runs ``first_run .. first_run + runs − 1``, all from
+    ``SeedSequence(seed)``: run ``i``'s is ``SeedSequence(seed, spawn_key=(i,))``, the ``i``-th child
+    ``SeedSequence(seed).spawn`` gives, so a batch of runs that starts at ``first_run`` holds the
+    same draws as those runs of a job that starts at 0 (``runs=auto``, docs/experiments.md)."""
+    children = [np.random.SeedSequence(seed, spawn_key=(i,)) for i in range(first_run, first_run + runs)]
+    per_run = [child.spawn(len(STREAMS)) for child in children]
     return {name: [ss[j] for ss in per_run] for j, name in enumerate(STREAMS)}
 
 
-def run_streams(seed: int, runs: int) -> dict[str, list[np.random.Generator]]:
-    """One generator per (purpose, run), all from ``SeedSequence(seed)``."""
-    return {name: [np.random.default_rng(s) for s in seqs] for name, seqs in run_seed_sequences(seed, runs).items()}
+def run_streams(seed: int, runs: int, first_run: int = 0) -> dict[str, list[np.random.Generator]]:
+    """One generator per (purpose, run) of runs ``first_run .. first_run + runs − 1``, all from
+    ``SeedSequence(seed)`` (:func:`run_seed_sequences`)."""
+    return {
+        name: [np.random.default_rng(s) for s in seqs]
+        for name, seqs in run_seed_sequences(seed, runs, first_run).items()
+    }
 
 
 NAMED = 2**32 - 1
 """The spawn-key branch of the named streams: never the index of a stream in :data:`STREAMS`."""
 
 
-def named_seed_sequences(seed: int, runs: int, name: str) -> list[np.random.SeedSequence]:
-    """One seed sequence per run for the stream called ``name`` (module docstring)."""
+def named_seed_sequences(seed: int, runs: int, name: str, first_run: int = 0) -> list[np.random.SeedSequence]:
+    """One seed sequence per run (``first_run`` onwards) for the stream called ``name`` (module docstring)."""
     words = [int(w) for w in np.frombuffer(hashlib.sha256(name.encode()).digest()[:16], dtype="<u4")]
-    return [np.random.SeedSequence(seed, spawn_key=(i, NAMED, *words)) for i in range(runs)]
+    return [np.random.SeedSequence(seed, spawn_key=(i, NAMED, *words)) for i in range(first_run, first_run + runs)]
 
 
-def named_streams(seed: int, runs: int, name: str) -> list[np.random.Generator]:
-    """One generator per run for the stream called ``name`` (module docstring)."""
-    return [np.random.default_rng(s) for s in named_seed_sequences(seed, runs, name)]
+def named_streams(seed: int, runs: int, name: str, first_run: int = 0) -> list[np.random.Generator]:
+    """One generator per run (``first_run`` onwards) for the stream called ``name`` (module docstring)."""
+    return [np.random.default_rng(s) for s in named_seed_sequences(seed, runs, name, first_run)]

@@ -108,12 +108,14 @@ def measure_aiding(
     are the runs' streams (:func:`~quadest.montecarlo.streams.run_streams`): a built-in sensor draws
     from those it names; every other stream, all of a plugin's and a new in-repository sensor's, is
     named after the sensor (``sensor:<name>:<stream>``)."""
-    runs, seed = truth.position.shape[0], int(settings.seed)
+    runs, seed, first_run = truth.position.shape[0], int(settings.seed), settings.first_run
     records, models = {}, {}
     for name, cls in _selected(settings).items():
         sensor = cls(sensor_settings(settings, name), context)
         own = {
-            s: streams[s] if is_builtin(cls) and s in streams else named_streams(seed, runs, f"sensor:{name}:{s}")
+            s: streams[s]
+            if is_builtin(cls) and s in streams
+            else named_streams(seed, runs, f"sensor:{name}:{s}", first_run)
             for s in cls.stream_names()
         }
         records[name] = sensor.simulate(truth, own)

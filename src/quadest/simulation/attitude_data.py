@@ -82,7 +82,7 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     """Fly the scenario for ``settings.runs`` runs and record what the attitude filters see."""
     mcfg, scfg = settings.model, settings.sensor
     runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
-    streams = run_streams(seed, runs)
+    streams = run_streams(seed, runs, settings.first_run)
     _, flown, truth = fly_scenario(settings, streams)
     g_e = np.array([0.0, 0.0, -float(mcfg.gravity)])
 
@@ -143,7 +143,7 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
         x0=x0,
         P0=P0,
         companion0=np.zeros((runs, 0)),
-        estimator_seeds=run_seed_sequences(seed, runs)["estimator"],
+        estimator_seeds=run_seed_sequences(seed, runs, settings.first_run)["estimator"],
         labels=labels,
         sensors={"mag": z_mag},
     )

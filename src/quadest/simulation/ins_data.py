@@ -91,7 +91,7 @@ def build_ins_data(settings: DataSettings) -> MonteCarloData:
     """Fly the scenario for ``settings.runs`` runs and record what the INS filters see."""
     mcfg, scfg = settings.model, settings.sensor
     runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
-    streams = run_streams(seed, runs)
+    streams = run_streams(seed, runs, settings.first_run)
     _, flown, truth = fly_scenario(settings, streams)
 
     scale = float(scfg.error_scale)
@@ -146,7 +146,7 @@ def build_ins_data(settings: DataSettings) -> MonteCarloData:
         x0=x0,
         P0=P0,
         companion0=np.zeros((runs, 0)),
-        estimator_seeds=run_seed_sequences(seed, runs)["estimator"],
+        estimator_seeds=run_seed_sequences(seed, runs, settings.first_run)["estimator"],
         labels=labels,
         sensors=records,
     )

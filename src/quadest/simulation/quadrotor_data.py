@@ -178,7 +178,7 @@ def _data(
         x0=x0,
         P0=P0,
         companion0=companion_truth[:, 0].copy(),
-        estimator_seeds=run_seed_sequences(int(settings.seed), len(streams["start"]))["estimator"],
+        estimator_seeds=run_seed_sequences(int(settings.seed), len(streams["start"]), settings.first_run)["estimator"],
         labels=data_labels(settings, flown),
         sensors=sensors or {},
     )
@@ -201,7 +201,7 @@ def build_quadrotor_data(settings: DataSettings) -> MonteCarloData:
     depends on every run sees them all.
     """
     runs = int(settings.runs)
-    streams = run_streams(int(settings.seed), runs)
+    streams = run_streams(int(settings.seed), runs, settings.first_run)
     arrays: list[np.ndarray] = []
     errors: list[tuple[TriadErrors, TriadErrors]] = []
     motion: list[np.ndarray] = []

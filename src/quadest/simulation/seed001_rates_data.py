@@ -32,7 +32,7 @@ def build_seed001_rates_data(settings: DataSettings) -> MonteCarloData:
     from the flown initial rates (:func:`propagate_rates`), measure the rates with a white-noise
     gyro of variance ``R``; each run's initial estimate is drawn from N(true rates, P0·I)."""
     m, runs, T, seed = settings.model, int(settings.runs), float(settings.sample_period), int(settings.seed)
-    streams = run_streams(seed, runs)
+    streams = run_streams(seed, runs, settings.first_run)
     params, flown, truth = fly_scenario(settings, streams)
     rotors = truth.state[..., ROTORS]
     K1 = rotors.shape[1]
@@ -48,7 +48,7 @@ def build_seed001_rates_data(settings: DataSettings) -> MonteCarloData:
     return MonteCarloData(
         model, truth.time, rates, np.zeros((runs, K1, 0)), rotors, rates + noise,
         draw_initial_estimates(rates[:, 0], P0, streams["initial"]), P0, np.zeros((runs, 0)),
-        run_seed_sequences(seed, runs)["estimator"], labels,
+        run_seed_sequences(seed, runs, settings.first_run)["estimator"], labels,
     )  # fmt: skip
 
 

@@ -31,7 +31,7 @@ def seed003_data(settings: DataSettings, truth_state: np.ndarray, normals: np.nd
     return MonteCarloData(
         model, np.arange(K1) * float(settings.sample_period), model.truth_to_state(truth_state),
         np.zeros((runs, K1, 0)), truth_state[..., ROTORS], z, z[:, 0].copy(), model.R.copy(), np.zeros((runs, 0)),
-        run_seed_sequences(int(settings.seed), runs)["estimator"], labels,
+        run_seed_sequences(int(settings.seed), runs, settings.first_run)["estimator"], labels,
     )  # fmt: skip
 
 
@@ -46,7 +46,7 @@ def seed003_labels(settings: DataSettings, scenario_name: str) -> dict:
 def build_seed003_attitude_data(settings: DataSettings) -> MonteCarloData:
     """Open loop: fly the scenario on the truth (the controller reads the true state) and measure
     the five states with the state sensor."""
-    streams = run_streams(int(settings.seed), int(settings.runs))
+    streams = run_streams(int(settings.seed), int(settings.runs), settings.first_run)
     _params, flown, truth = fly_scenario(settings, streams)
     normals = state_sensor_normals(streams, truth.state.shape[1])
     return seed003_data(settings, truth.state, normals, seed003_labels(settings, flown.name))

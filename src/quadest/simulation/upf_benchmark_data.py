@@ -27,7 +27,7 @@ def build_upf_benchmark_data(settings: DataSettings) -> MonteCarloData:
         float(m.Q), float(m.R), float(m.gamma_shape), float(m.gamma_rate), float(m.switch_time),
         float(settings.sample_period), runs,
     )  # fmt: skip
-    streams = run_streams(seed, runs)
+    streams = run_streams(seed, runs, settings.first_run)
     inputs = np.broadcast_to(np.arange(1.0, K + 2.0)[None, :, None], (runs, K + 1, 1)).copy()
     v = np.stack([model.sample_process_noise(rng, (K + 1,)) for rng in streams["process"]])
     n = np.stack([rng.standard_normal((K + 1, 1)) for rng in streams["measurement"]]) * math.sqrt(float(m.R))
@@ -40,7 +40,7 @@ def build_upf_benchmark_data(settings: DataSettings) -> MonteCarloData:
     return MonteCarloData(
         model, np.arange(K + 1) * float(settings.sample_period), x, np.zeros((runs, K + 1, 0)), inputs, z,
         np.full((runs, 1), float(m.x0)), np.array([[float(m.P0)]]), np.zeros((runs, 0)),
-        run_seed_sequences(seed, runs)["estimator"], labels,
+        run_seed_sequences(seed, runs, settings.first_run)["estimator"], labels,
     )  # fmt: skip
 
 

@@ -71,13 +71,13 @@ def data_from_filter_model(
         inputs: (B, K+1, nu) the input at every sample (``nu`` may be 0).
     """
     runs, seed = int(settings.runs), int(settings.seed)
-    streams = run_streams(seed, runs)
+    streams = run_streams(seed, runs, settings.first_run)
     x, z = _simulate(model, x0_true, inputs, streams)
     K1 = inputs.shape[1]
     time = np.arange(K1) * float(settings.sample_period)
     empty = np.zeros((runs, K1, 0))
     labels = simulation_labels(settings)
-    estimator_seeds = run_seed_sequences(seed, runs)["estimator"]
+    estimator_seeds = run_seed_sequences(seed, runs, settings.first_run)["estimator"]
     return MonteCarloData(model, time, x, empty, inputs, z, x0_est, P0, np.zeros((runs, 0)), estimator_seeds, labels)
 
 
@@ -89,7 +89,7 @@ def build_linear_data(settings: DataSettings) -> MonteCarloData:
     std = np.array(list(settings.model.initial_std))
     P0 = initial_covariance(std, float(settings.model.initial_correlation))
     x0 = np.broadcast_to(np.array(list(settings.model.initial_state), dtype=float), (runs, 4))
-    est = draw_initial_estimates(x0, P0, run_streams(int(settings.seed), runs)["initial"])
+    est = draw_initial_estimates(x0, P0, run_streams(int(settings.seed), runs, settings.first_run)["initial"])
     return data_from_filter_model(settings, model, x0, est, P0, np.zeros((runs, K + 1, 0)))
 
 
@@ -100,7 +100,7 @@ def build_ungm_data(settings: DataSettings) -> MonteCarloData:
     m = settings.model
     model = UNGMModel(float(m.Q), float(m.R), float(settings.sample_period), runs)
     x0 = float(m.x0_mean) + np.sqrt(float(m.x0_var)) * np.array(
-        [rng.standard_normal(1) for rng in run_streams(int(settings.seed), runs)["start"]]
+        [rng.standard_normal(1) for rng in run_streams(int(settings.seed), runs, settings.first_run)["start"]]
     )
     inputs = np.broadcast_to(np.arange(K + 1, dtype=float)[None, :, None], (runs, K + 1, 1)).copy()
     est = np.full((runs, 1), float(m.m0))
