@@ -628,6 +628,8 @@ MUTATIONS = (
         "from quadest.app.settings import data_settings\nfrom quadest.estimators.srukf import SRUKF",
         "from quadest.estimators.srukf import SRUKF",
         ("tests/test_benchmarks_quick.py::test_quick_mode_runs",),
+    ),
+    Mutation(
         "the ledger's interval loses its order under a negative scale",
         "src/quadest/aggregate/reproductions.py",
         "        low, high = high, low",
@@ -668,6 +670,8 @@ MUTATIONS = (
         "    value = values[0] if reduce is None else REDUCERS[reduce](values)",
         "    value = values[0]",
         ("tests/test_doc_numbers.py::test_ranges_scales_and_signs",),
+    ),
+    Mutation(
         "runs=auto looks with a fixed 95 % interval at every look (no alpha-spending)",
         "src/quadest/evaluation/sequential.py",
         "    return np.diff(np.concatenate([[0.0], spent]))\n",
