@@ -41,6 +41,7 @@ import pandas as pd
 import yaml
 
 from quadest.aggregate import verdicts as v
+from quadest.aggregate.reproduction_entries import Entry, Outcome, Reading
 from quadest.aggregate.reproductions_render import render_csv, render_markdown
 
 CLAIM_KEYS = {"claim", "where", "source_value", "command", "measure", "expect", "cause", "testable", "why",
@@ -53,48 +54,6 @@ PAIR_COLUMNS = {"pair", "estimator", "reference", "state", "arm", "metric", "ste
 
 class ClaimError(ValueError):
     """A claim file that cannot be read into the ledger (the message names the file and the claim)."""
-
-
-@dataclass(frozen=True)
-class Reading:
-    """Our number for one claim: the estimate and its 95 % CI (equal to it when the value is exact)."""
-
-    value: float
-    low: float
-    high: float
-    unit: str
-    p_raw: float | None = None
-    test: str | None = None
-    runs: int | None = None
-    family: tuple = ()
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """One reading of a claim, decided: ``reading`` is None for a reading not run (``why`` says what would run it)."""
-
-    name: str
-    command: str
-    rule: v.Rule | None
-    reading: Reading | None
-    decision: v.Decision
-    p: float | None = None
-    family_size: int = 1
-    why: str = ""
-
-
-@dataclass(frozen=True)
-class Entry:
-    """One row of the ledger."""
-
-    source: str
-    claim: str
-    where: str
-    source_value: str
-    choice: str
-    outcomes: tuple[Outcome, ...]
-    verdict: str
-    cause: str
 
 
 def read_measure(measure: dict, root: Path, label: str) -> Reading:

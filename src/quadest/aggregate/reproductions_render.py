@@ -6,12 +6,9 @@ from __future__ import annotations
 import csv
 import io
 import math
-from typing import TYPE_CHECKING
 
 from quadest.aggregate import verdicts as v
-
-if TYPE_CHECKING:
-    from quadest.aggregate.reproductions import Entry, Outcome
+from quadest.aggregate.reproduction_entries import Entry, Outcome
 
 CSV_COLUMNS = ("source", "claim", "verdict", "estimate", "ci_low", "ci_high", "rule", "rule_low", "rule_high", "p",
                "runs", "runs_needed", "choice")  # fmt: skip
