@@ -28,6 +28,7 @@ from typing import Protocol
 import numpy as np
 from tqdm.auto import tqdm
 
+from quadest.app.parent_watch import pool_options
 from quadest.cache.lookup import JobCache
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator, resolve
@@ -159,7 +160,8 @@ def run_estimators(
 
 
 def _pool(processes: int) -> ProcessPoolExecutor:
-    return ProcessPoolExecutor(max_workers=processes, mp_context=multiprocessing.get_context("spawn"))
+    """Worker processes that die with this one (:mod:`quadest.app.parent_watch`)."""
+    return ProcessPoolExecutor(max_workers=processes, mp_context=multiprocessing.get_context("spawn"), **pool_options())
 
 
 def _in_processes(
