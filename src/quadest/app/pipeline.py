@@ -14,7 +14,7 @@ summary's own fields, the kind's own files and figures). The output folder's lay
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -82,10 +82,10 @@ class Report:
     """``metrics.csv``, ``rmse_summary.csv``, ``paired_comparison.csv``, ``rmse_table.md``."""
     fields: dict[str, Any]
     """The kind's own fields of ``summary.json`` (labels, names, notes), in order."""
-    series: dict[str, np.ndarray] = field(default_factory=dict)
+    series: dict[str, np.ndarray]
     """``timeseries.npz`` (none if empty)."""
-    caption: str | None = None
-    """Printed above the table (``None``: the CLI's default caption)."""
+    caption: str
+    """Printed above the table (:func:`quadest.evaluation.captions.table_caption`)."""
     after_table: str | None = None
     """Printed below the table (the replay's differences to its offline reference)."""
 
@@ -118,7 +118,7 @@ def run_pipeline(
     write every output into ``out_dir``. ``cfg`` itself is only written (``config.yaml``) and hashed
     into the data key (:func:`quadest.app.settings.data_key`); everything else reads ``job``.
     Returns the JSON summary, with the printed table (``_table``), the paired lines (``_paired``)
-    and, where the kind has them, the caption (``_caption``) and the text below the table
+    the caption (``_caption``) and, where the kind has it, the text below the table
     (``_after_table``) for the CLI."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -148,8 +148,7 @@ def run_pipeline(
     write_summary(out_dir, summary)
     summary["_table"] = report.tables.printed
     summary["_paired"] = summary_lines(report.tables.paired)
-    if report.caption is not None:
-        summary["_caption"] = report.caption
+    summary["_caption"] = report.caption
     if report.after_table is not None:
         summary["_after_table"] = report.after_table
     return summary
