@@ -202,3 +202,29 @@ def test_a_refused_value_raises_config_error_in_process():
     with pytest.raises(ConfigError, match=r"estimator\.srukf\.alpha"):
         run_job(compose_config(["estimator.srukf.alpha=1e-10"]), ROOT / "never-written")
     assert not (ROOT / "never-written").exists()
+
+
+class _Refuses:
+    """Work whose estimator refuses its configuration when it runs (what validation cannot see)."""
+
+    def run(self, label, node, settings):
+        raise ConfigError(f"estimator.{label}.gain", 2.0, "must be < 1")
+
+    def failed(self, label, reason, settings):
+        raise AssertionError(f"recorded as a failed result: {reason}")
+
+    def shippable(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_an_estimator_refusing_its_configuration_fails_the_job_not_its_runs(workers):
+    from quadest.app.estimator_runs import RunSettings, run_estimators
+    from quadest.app.schema import CacheConf
+    from quadest.cache.lookup import JobCache
+
+    nodes = {"a": {"kind": "ekf"}, "b": {"kind": "ekf"}}
+    with pytest.raises(ConfigError, match=r"estimator\.[ab]\.gain"):
+        run_estimators(
+            _Refuses(), nodes, JobCache.for_job(CacheConf(enabled=False), None), RunSettings(50.0, 0), workers
+        )

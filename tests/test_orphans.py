@@ -75,3 +75,37 @@ def _cmdline(pid: int) -> str:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
     except OSError:
         return ""
+
+
+LAUNCHER = """
+import multiprocessing, sys, time
+from quadest.app.parent_watch import watch_parent
+
+def cell():
+    watch_parent()  # what quadest.app.cli does first in a launcher's worker
+    print("watching", flush=True)
+    time.sleep(300)
+
+if __name__ == "__main__":
+    multiprocessing.get_context("spawn").Process(target=cell).start()
+    time.sleep(300)
+"""
+
+
+def test_a_launchers_worker_dies_with_the_sweeps_main_process(tmp_path):
+    """A Hydra launcher's worker (joblib's loky, like multiprocessing, records its parent) watches
+    the process that started it."""
+    script = tmp_path / "launcher.py"
+    script.write_text(LAUNCHER)
+    main = subprocess.Popen([sys.executable, str(script)], start_new_session=True, stdout=subprocess.PIPE, text=True)
+    try:
+        assert main.stdout.readline().strip() == "watching"
+        assert len(_group(main.pid)) >= 2
+        main.send_signal(signal.SIGKILL)
+        main.wait()
+        assert _wait(lambda: not _group(main.pid), 10), f"processes left: {_group(main.pid)}"
+    finally:
+        try:
+            os.killpg(main.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass

@@ -11,7 +11,9 @@ the job's data, or fly it in the control loop) and what its result is when that 
 - **failure isolation**: an estimator that raises, whose result cannot come back from its
   process, or whose process dies, is recorded with :meth:`Work.failed` and the exception text;
   the other estimators' results are kept. After a process died, the estimators still missing run
-  again, each alone in a new process, so that one estimator can only take down itself.
+  again, each alone in a new process, so that one estimator can only take down itself. An
+  estimator that refuses its configuration (:class:`~quadest.errors.ConfigError`) fails the job
+  instead: a failed job, not a divergence.
 """
 
 from __future__ import annotations
@@ -117,9 +119,13 @@ Outcome = tuple[EstimatorResult, bool]
 
 
 def _run_one(work: Work, label: str, node: dict, settings: RunSettings) -> Outcome:
-    """Run one estimator; any exception becomes a failed result with its text."""
+    """Run one estimator; any exception but a :class:`ConfigError` becomes a failed result with its
+    text. A ``ConfigError`` (the estimator refuses its configuration) fails the job: it is no
+    divergence, and no run of that configuration could succeed."""
     try:
         return work.run(label, node, settings), True
+    except ConfigError:
+        raise
     except Exception as exc:  # a broken estimator is recorded, never fatal to the job
         return work.failed(label, f"{type(exc).__name__}: {exc}", settings), False
 
@@ -184,6 +190,9 @@ def _in_processes(
                 outcome = future.result()
             except BrokenProcessPool:  # a process died: run what is missing alone, below
                 continue
+            except ConfigError:
+                pool.shutdown(cancel_futures=True)
+                raise
             except Exception as exc:  # e.g. a result that cannot be pickled back
                 outcome = work.failed(label, f"{type(exc).__name__}: {exc}", settings), False
             done(label, outcome)
@@ -194,6 +203,8 @@ def _in_processes(
         with _pool(1) as pool:
             try:
                 outcome = pool.submit(_run_one, work, label, node, settings).result()
+            except ConfigError:
+                raise
             except Exception as exc:  # its process died again: this estimator is the one
                 outcome = work.failed(label, f"{type(exc).__name__}: {exc}", settings), False
         done(label, outcome)
