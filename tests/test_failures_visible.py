@@ -5,6 +5,7 @@ non-zero; the paired summary says when its test cannot reach significance."""
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
@@ -228,3 +229,17 @@ def test_an_estimator_refusing_its_configuration_fails_the_job_not_its_runs(work
         run_estimators(
             _Refuses(), nodes, JobCache.for_job(CacheConf(enabled=False), None), RunSettings(50.0, 0), workers
         )
+
+
+def test_a_plain_sweeps_report_names_its_swept_keys(tmp_path):
+    """``quadest -m runs=2,3 seed=1``: the command line sweeps ``runs`` (no sweeper params), fixes
+    ``seed`` (also in the params here, so the command line's single value wins)."""
+    from quadest.aggregate.report import aggregate
+
+    (tmp_path / "multirun.yaml").write_text(
+        "hydra:\n  sweeper:\n    params:\n      seed: 1,2\n      model.x: 0.1,0.2\n"
+        "  overrides:\n    task:\n    - runs=2,3\n    - seed=1\n    - estimator=[ekf,ukf]\n"
+    )
+    report = aggregate(tmp_path).read_text()
+    swept = next(line for line in report.splitlines() if line.startswith("- swept: "))
+    assert json.loads(swept.removeprefix("- swept: ")) == {"model.x": "0.1,0.2", "runs": "2,3"}
