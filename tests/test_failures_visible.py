@@ -243,3 +243,27 @@ def test_a_plain_sweeps_report_names_its_swept_keys(tmp_path):
     report = aggregate(tmp_path).read_text()
     swept = next(line for line in report.splitlines() if line.startswith("- swept: "))
     assert json.loads(swept.removeprefix("- swept: ")) == {"model.x": "0.1,0.2", "runs": "2,3"}
+
+
+@pytest.mark.parametrize("progress", [True, False])
+def test_a_long_job_prints_progress_lines_unless_progress_is_off(capsys, monkeypatch, tmp_path, progress):
+    import quadest.app.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "is_long", lambda runs, duration, sample_period: True)
+    overrides = ["model=linear", "estimator=[ekf,ukf]", "runs=2", "duration=0.5", f"progress={progress}",
+                 "workers=1", "cache.enabled=false", "output.figures=false"]  # fmt: skip
+    run_job(compose_config(overrides), tmp_path / "job")
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("quadest: progress: ")]
+    if not progress:
+        assert lines == []
+        return
+    assert lines[0].startswith("quadest: progress: making the data: 2 runs")
+    assert [line.split(" (")[0] for line in lines[-2:]] == [
+        "quadest: progress: ekf done, 1 of 2 estimators",
+        "quadest: progress: ukf done, 2 of 2 estimators",
+    ]
+
+
+def test_a_job_is_long_from_a_million_run_steps():
+    assert not sizing.is_long(50, 20.0, 0.01)  # the default job: 50 x 2001
+    assert sizing.is_long(500, 20.0, 0.01) and sizing.is_long(1, 1e4, 0.01)

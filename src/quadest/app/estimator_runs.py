@@ -139,11 +139,17 @@ def _result_key(cache: JobCache, label: str, node: dict, settings: RunSettings) 
 
 
 def run_estimators(
-    work: Work, nodes: dict[str, dict], cache: JobCache, settings: RunSettings, workers: int
+    work: Work,
+    nodes: dict[str, dict],
+    cache: JobCache,
+    settings: RunSettings,
+    workers: int,
+    announce: Callable[[str], None] | None = None,
 ) -> tuple[list[EstimatorResult], dict[str, bool]]:
     """Every estimator's result, in the order of ``nodes`` (label → resolved config), and whether
     each came from the cache (module docstring). A cached result is the object stored by the run
-    that computed it, its ``step_time_us`` included."""
+    that computed it, its ``step_time_us`` included. ``announce(label)`` is called as each
+    estimator that ran is done (a long job's progress lines, :mod:`quadest.app.pipeline`)."""
     keys = {label: _result_key(cache, label, node, settings) for label, node in nodes.items()}
     results = {label: cache.result(keys[label]) for label in nodes}
     from_cache = {label: result is not None for label, result in results.items()}
@@ -156,6 +162,8 @@ def run_estimators(
         results[label], ran = outcome
         if ran:
             cache.keep(keys[label], results[label])
+        if announce is not None:
+            announce(label)
 
     if processes == 1:
         for label, node in todo.items():

@@ -13,8 +13,11 @@ summary's own fields, the kind's own files and figures). The output folder's lay
 
 from __future__ import annotations
 
+import itertools
+import sys
+import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -23,7 +26,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from quadest.app.estimator_runs import RunSettings, Work, run_estimators
 from quadest.app.provenance import provenance
+from quadest.app.schema import ExperimentConf
 from quadest.app.settings import JobSettings, data_key
+from quadest.app.sizing import is_long
 from quadest.cache.lookup import JobCache
 from quadest.estimators.registry import estimator_parameters
 from quadest.evaluation.formatting import strict_json
@@ -111,6 +116,32 @@ class JobKind(Protocol):
         ...
 
 
+@dataclass
+class Progress:
+    """A long job's progress lines on stderr (``quadest: progress: ...``, with the seconds since the
+    job began): when the data is made and as each estimator is done. A job is long from
+    :data:`~quadest.app.sizing.LONG_JOB_RUN_STEPS` run-steps on, and only with ``progress: true``
+    (the per-step bars of a terminal stay as they are)."""
+
+    enabled: bool
+    start: float = field(default_factory=time.perf_counter)
+
+    @classmethod
+    def of(cls, exp: ExperimentConf) -> Progress:
+        simulated = exp.source is None  # a replay is one log
+        return cls(bool(exp.progress) and simulated and is_long(exp.runs, exp.duration, exp.sample_period))
+
+    def line(self, text: str) -> None:
+        if self.enabled:
+            print(f"quadest: progress: {text} ({time.perf_counter() - self.start:.0f} s)", file=sys.stderr, flush=True)
+
+    def estimator_done(self, total: int) -> Callable[[str], None] | None:
+        if not self.enabled:
+            return None
+        count = itertools.count(1)
+        return lambda label: self.line(f"{label} done, {next(count)} of {total} estimators")
+
+
 def run_pipeline(
     kind: JobKind, job: JobSettings, cfg: DictConfig, out_dir: Path, overrides: list[str] | None = None
 ) -> dict:
@@ -125,12 +156,16 @@ def run_pipeline(
     (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
     exp = job.experiment
     cache = JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)
+    progress = Progress.of(exp)
+    progress.line(f"making the data: {exp.runs} runs of {exp.duration:g} s at sample_period={exp.sample_period:g} s")
     data, data_from_cache = cache.data(kind.make_data) if kind.caches_data else (kind.make_data(), False)
     nodes = exp.estimator
     params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
     settings = RunSettings(float(exp.divergence_bound), min(int(exp.output.saved_runs), int(exp.runs)),
                            bool(exp.progress))  # fmt: skip
-    results, from_cache = run_estimators(kind.work(data), nodes, cache, settings, int(exp.workers))
+    progress.line(f"running {len(nodes)} estimator(s)")
+    results, from_cache = run_estimators(kind.work(data), nodes, cache, settings, int(exp.workers),
+                                         progress.estimator_done(len(nodes)))  # fmt: skip
     rows = table_rows(results, params, from_cache)
     report = kind.report(Finished(out_dir, data, results, rows, settings.saved_runs, cache.derived))
     write_tables(out_dir, with_cache_column(report.tables, rows.from_cache))
