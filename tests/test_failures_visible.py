@@ -267,3 +267,9 @@ def test_a_long_job_prints_progress_lines_unless_progress_is_off(capsys, monkeyp
 def test_a_job_is_long_from_a_million_run_steps():
     assert not sizing.is_long(50, 20.0, 0.01)  # the default job: 50 x 2001
     assert sizing.is_long(500, 20.0, 0.01) and sizing.is_long(1, 1e4, 0.01)
+
+
+def test_a_smoothers_backward_pass_counts_in_the_size():
+    """The K transitions' gains and residuals of each smoother, 2 K B n² floats (docs/smoothers.md)."""
+    base = sizing.job_bytes(10, 101, 4, 2, 1, 3)
+    assert sizing.job_bytes(10, 101, 4, 2, 1, 3, smoothers=1) - base == 8 * 2 * 100 * 10 * 4 * 4

@@ -10,7 +10,9 @@ dimension ``n``, ``E`` estimators and ``P`` worker processes (:func:`~quadest.ap
 - each estimator's saved time series, ``8 S (K + 1) 3n`` bytes (``S`` = min(``output.saved_runs``,
   ``runs``): estimate, standard deviation and companions of the saved runs), kept for every estimator;
 - each running estimator's state, ``8 B (2n + 1) n`` bytes (the sigma points of every run, the
-  largest of a Gaussian filter's per-step arrays), in ``min(P, E)`` processes at once.
+  largest of a Gaussian filter's per-step arrays), in ``min(P, E)`` processes at once;
+- each smoother's backward pass, ``8 · 2 K B n²`` bytes (the K transitions' gains and residuals,
+  docs/smoothers.md; a particle smoother's clouds come on top).
 
 It is a floor, not a peak (intermediate arrays and Python's own overhead come on top), so a job
 refused by it cannot run. Above the memory the machine has available (``MemAvailable`` of
@@ -39,13 +41,16 @@ LONG_JOB_RUN_STEPS = 1_000_000
 _GIB = 2**30
 
 
-def job_bytes(runs: int, steps: int, n: int, estimators: int, processes: int, saved_runs: int) -> int:
+def job_bytes(
+    runs: int, steps: int, n: int, estimators: int, processes: int, saved_runs: int, smoothers: int = 0
+) -> int:
     """The floor of the memory a simulated job needs, in bytes (module docstring); ``steps`` is K + 1."""
     data = 8 * runs * steps * 2 * n
     copies = 1 + processes if processes > 1 else 1
     saved = estimators * 8 * min(saved_runs, runs) * steps * 3 * n
     state = min(processes, estimators) * 8 * runs * (2 * n + 1) * n
-    return copies * data + saved + state
+    backward = smoothers * 8 * 2 * (steps - 1) * runs * n * n
+    return copies * data + saved + state + backward
 
 
 def available_memory() -> int | None:
@@ -63,19 +68,26 @@ def available_memory() -> int | None:
 
 
 def check_size(
-    runs: int, duration: float, sample_period: float, n: int, estimators: int, processes: int, saved_runs: int
+    runs: int,
+    duration: float,
+    sample_period: float,
+    n: int,
+    estimators: int,
+    processes: int,
+    saved_runs: int,
+    smoothers: int = 0,
 ) -> int:
     """Refuse (:class:`ConfigError`) a job whose :func:`job_bytes` exceed the available memory;
     warn on stderr above :data:`WARN_FRACTION` of it. Returns the estimate in bytes."""
     steps = sample_count(duration, sample_period) + 1
-    need = job_bytes(runs, steps, n, estimators, processes, saved_runs)
+    need = job_bytes(runs, steps, n, estimators, processes, saved_runs, smoothers)
     have = available_memory()
     if have is None:
         return need
     what = (
         f"about {need / _GIB:.3g} GiB for {runs} runs x {steps} samples (duration={duration:g} s, "
-        f"sample_period={sample_period:g} s) of a {n}-state model, {estimators} estimator(s) in {processes} "
-        f"process(es); this machine has {have / _GIB:.3g} GiB available"
+        f"sample_period={sample_period:g} s) of a {n}-state model, {estimators} estimator(s) ({smoothers} with a "
+        f"smoother) in {processes} process(es); this machine has {have / _GIB:.3g} GiB available"
     )
     if need > have:
         raise ConfigError("runs", runs, f"the job needs {what}; lower runs or duration, raise sample_period, or "

@@ -117,6 +117,15 @@ def validate_estimators(experiment: ExperimentConf, settings: DataSettings) -> N
             )
 
 
+def validate_size(experiment: ExperimentConf, settings: DataSettings) -> None:
+    """The job's memory floor against the machine's (:func:`quadest.app.sizing.check_size`)."""
+    nodes = experiment.estimator
+    smoothers = sum(node.get("smoother", "none") != "none" for node in nodes.values())
+    processes = resolve_workers(experiment.workers, len(nodes))
+    check_size(experiment.runs, experiment.duration, experiment.sample_period, state_dimension(settings), len(nodes),
+               processes, experiment.output.saved_runs, smoothers)  # fmt: skip
+
+
 def check_labels(overrides: list[str]) -> None:
     """An estimator selected twice (``estimator=[srukf,srukf]``) would run once under one label:
     refused. A second copy takes a label of its own (``+estimator.srukf_b.kind=srukf``, docs/usage.md)."""
@@ -147,9 +156,7 @@ def validate(cfg: DictConfig) -> JobSettings:
         validate_replay(data, experiment.output.saved_runs)
     validate_estimators(experiment, data)
     if experiment.source is None:  # a replay is one log of known length
-        estimators = len(experiment.estimator)
-        check_size(experiment.runs, experiment.duration, experiment.sample_period, state_dimension(data), estimators,
-                   resolve_workers(experiment.workers, estimators), experiment.output.saved_runs)  # fmt: skip
+        validate_size(experiment, data)
     validate_cache(experiment.cache)
     validate_objective(experiment.objective, list(experiment.estimator))
     return settings
