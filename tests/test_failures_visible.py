@@ -92,6 +92,8 @@ def test_an_output_folder_that_cannot_be_made_is_refused(capsys, tmp_path):
     blocker.write_text("")
     line = refused(capsys, ["runs=2", "duration=0.5", f"hydra.run.dir={blocker / 'out'}"])
     assert "hydra.run.dir=" in line and "is not a folder" in line
+    line = refused(capsys, ["-m", "runs=2,3", f"hydra.sweep.dir={blocker / 'sweep'}"])
+    assert "hydra.sweep.dir=" in line and "is not a folder" in line
 
 
 def test_a_job_larger_than_the_machine_is_refused_naming_the_keys(capsys, monkeypatch):

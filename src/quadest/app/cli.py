@@ -183,11 +183,15 @@ def precheck(argv: list[str], primary: Path | None = None) -> None:
     is the experiment file that is the run's primary config (:func:`one_way`), else the root
     config. An experiment that sweeps (``hydra.mode: MULTIRUN``) takes sweeps on the command line
     without ``-m``: each of their values is checked (the other sweeps at their first value); in a
-    single run a sweep is Hydra's "ambiguous value" error."""
-    if any(arg in _HYDRA_FLAGS or arg.startswith("--") for arg in argv):
-        return
+    single run a sweep is Hydra's "ambiguous value" error. With ``-m`` only the sweep's output
+    folder is checked (:func:`check_sweep_dir`); the values are left to each job."""
     folder, name = (str(primary.parent), primary.stem) if primary is not None else (config_dir(), "config")
     hydra_args = [a for a in argv if a.lstrip("+~").startswith(("hydra.", "hydra/"))]
+    flags = [arg for arg in argv if arg in _HYDRA_FLAGS or arg.startswith("--")]
+    if flags and set(flags) <= {"-m", "--multirun"}:
+        check_sweep_dir(folder, name, hydra_args)
+    if flags:
+        return
     overrides = [a for a in argv if a not in hydra_args]
     GlobalHydra.instance().clear()
     try:
@@ -211,6 +215,22 @@ def precheck(argv: list[str], primary: Path | None = None) -> None:
 
 
 _LISTED = (ValueType.SIMPLE_CHOICE_SWEEP, ValueType.CHOICE_SWEEP, ValueType.RANGE_SWEEP)
+
+
+def check_sweep_dir(folder: str, name: str, hydra_args: list[str]) -> None:
+    """Refuse (one line, exit code 2) a ``-m`` sweep whose ``hydra.sweep.dir`` cannot be made; a
+    config that does not compose is left to Hydra's own message."""
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=folder, version_base="1.3"):
+            cfg = compose(config_name=name, overrides=hydra_args, return_hydra_config=True)
+        check_output_dir("hydra.sweep.dir", cfg)
+    except ConfigError as exc:
+        _fail(str(exc))
+    except Exception:  # Hydra reports its own composition errors when it starts
+        return
+    finally:
+        GlobalHydra.instance().clear()
 
 
 def check_output_dir(key: str, cfg: DictConfig) -> None:
