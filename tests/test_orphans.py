@@ -79,10 +79,13 @@ def _cmdline(pid: int) -> str:
 
 LAUNCHER = """
 import multiprocessing, sys, time
-from quadest.app.parent_watch import watch_parent
+from quadest.app.parent_watch import _pdeathsig, watch_parent
 
 def cell():
-    watch_parent()  # what quadest.app.cli does first in a launcher's worker
+    if sys.argv[1] == "kernel":
+        assert _pdeathsig()  # the kernel's signal alone, no polling thread
+    else:
+        watch_parent()  # what quadest.app.cli does first in a launcher's worker
     print("watching", flush=True)
     time.sleep(300)
 
@@ -92,12 +95,16 @@ if __name__ == "__main__":
 """
 
 
-def test_a_launchers_worker_dies_with_the_sweeps_main_process(tmp_path):
+@pytest.mark.parametrize("how", ["poll", "kernel"])
+def test_a_launchers_worker_dies_with_the_sweeps_main_process(tmp_path, how):
     """A Hydra launcher's worker (joblib's loky, like multiprocessing, records its parent) watches
-    the process that started it."""
+    the process that started it; on Linux the kernel's parent-death signal alone suffices too."""
+    if how == "kernel" and not sys.platform.startswith("linux"):
+        pytest.skip("PR_SET_PDEATHSIG is Linux's")
     script = tmp_path / "launcher.py"
     script.write_text(LAUNCHER)
-    main = subprocess.Popen([sys.executable, str(script)], start_new_session=True, stdout=subprocess.PIPE, text=True)
+    command = [sys.executable, str(script), how]
+    main = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, text=True)
     try:
         assert main.stdout.readline().strip() == "watching"
         assert len(_group(main.pid)) >= 2
