@@ -241,10 +241,11 @@ def test_summary_json_names_the_code_that_made_it(tmp_path, monkeypatch):
     small_job(tmp_path, "linear", ["model=linear", "estimator=[ekf]"])
     summary = json.loads((tmp_path / "linear" / "summary.json").read_text())
     assert summary["code_version"] == code_version() and summary["commit"] == job.git_commit()
-    answers = {"rev-parse": "abc", "status": " M src/quadest/app/job.py"}
+    answers = {"ls-files": "provenance.py", "rev-parse": "abc", "status": " M src/quadest/app/job.py"}
     monkeypatch.setattr(job, "_git", lambda *args: answers[args[0]])
     assert job.provenance()["commit_dirty"] is True
     answers["status"] = ""
-    assert job.provenance() == {"commit": "abc", "commit_dirty": False, "code_version": code_version()}
+    assert job.provenance() == {"commit": "abc", "commit_dirty": False, "commit_source": "git",
+                                "code_version": code_version()}  # fmt: skip
     monkeypatch.setattr(job, "_git", lambda *args: None)
     assert job.provenance()["commit"] == "unknown" and job.provenance()["commit_dirty"] is None

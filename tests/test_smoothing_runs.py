@@ -215,12 +215,8 @@ def test_the_particle_smoothers_draws_are_per_run_and_apart_from_the_filters():
 
 def test_a_table_with_smoothed_rows_says_its_pcrlb_is_the_filtering_bound():
     """A smoother uses later measurements, so the filtering PCRLB is not its floor: the caption of a
-    job with a smoother says so, one without does not."""
-    from quadest.app.cli import has_smoother
+    job with a smoother says so, one without does not (every job kind: tests/test_captions.py)."""
     from quadest.evaluation.pcrlb import pcrlb_caption
 
-    with_smoother = compose_config(["model=ungm", "estimator=[mekf,ckf]", "estimator.ckf.smoother=fixed_interval"])
-    without = compose_config(["model=ungm", "estimator=[mekf,ckf]"])
-    assert has_smoother(with_smoother) and not has_smoother(without)
     assert "filtering bound" in pcrlb_caption("ungm", smoothed=True) and "floor" in pcrlb_caption("ungm", True)
     assert "filtering bound" not in pcrlb_caption("ungm")

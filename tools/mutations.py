@@ -66,6 +66,7 @@ SMOOTHERS = "tests/test_smoothers.py::"
 SMOOTHING_RUNS = "tests/test_smoothing_runs.py::"
 SEQUENTIAL = "tests/test_sequential.py::"
 SEQUENTIAL_RUNS = "tests/test_sequential_runs.py::"
+VISIBLE = "tests/test_failures_visible.py::"
 
 MUTATIONS = (
     Mutation(
@@ -145,9 +146,9 @@ MUTATIONS = (
     Mutation(
         "a job kind writes summary.json itself",
         "src/quadest/app/replay_job.py",
-        "        return Report(tables, fields, arrays, caption(data), after)\n",
+        "        return Report(tables, fields, arrays, caption(data, results), after)\n",
         '        (finished.out_dir / "summary.json").write_text("{}")\n'
-        "        return Report(tables, fields, arrays, caption(data), after)\n",
+        "        return Report(tables, fields, arrays, caption(data, results), after)\n",
         (PIPELINE + "test_only_the_pipeline_writes_summary_json_and_the_metric_tables",),
     ),
     Mutation(
@@ -691,6 +692,79 @@ MUTATIONS = (
         "        if decisions.settled:\n            break\n",
         "",
         (SEQUENTIAL + "test_the_job_stops_at_the_first_look_where_every_comparison_is_decided",),
+    ),
+    Mutation(
+        "n + lambda validated in real arithmetic, not as the filter computes it",
+        "src/quadest/estimators/params.py",
+        "    if n + lam > 0:\n        return []",
+        "    if alpha**2 * (n + kappa) > 0:\n        return []",
+        (VISIBLE + "test_the_validation_of_n_plus_lambda_agrees_with_the_filters_weights",
+         VISIBLE + "test_a_configuration_that_cannot_run_is_refused_naming_its_key"),
+    ),
+    Mutation(
+        "an infinite value passes a range check",
+        "src/quadest/config/ranges.py",
+        "    if not math.isfinite(value):\n",
+        "    if math.isnan(value):\n",
+        (VISIBLE + "test_a_configuration_that_cannot_run_is_refused_naming_its_key",),
+    ),
+    Mutation(
+        "an estimator selected twice runs once",
+        "src/quadest/app/validate.py",
+        "twice = sorted({name for name in names if names.count(name) > 1})",
+        "twice = []",
+        (VISIBLE + "test_a_configuration_that_cannot_run_is_refused_naming_its_key",),
+    ),
+    Mutation(
+        "an estimator refusing its configuration recorded as diverged runs",
+        "src/quadest/app/estimator_runs.py",
+        "        return work.run(label, node, settings), True\n    except ConfigError:\n        raise\n",
+        "        return work.run(label, node, settings), True\n",
+        (VISIBLE + "test_an_estimator_refusing_its_configuration_fails_the_job_not_its_runs",),
+    ),
+    Mutation(
+        "a sweep with a failed cell exits 0",
+        "src/quadest/app/cli.py",
+        "        sys.exit(SWEEP_FAILED)",
+        "        return",
+        (VISIBLE + "test_a_sweep_with_a_failed_cell_exits_non_zero_and_keeps_the_others",),
+    ),
+    Mutation(
+        "a plain -m sweep's report names only the sweeper's params",
+        "src/quadest/aggregate/sweep.py",
+        '    for item in (hydra.get("overrides") or {}).get("task") or []:\n'
+        '        key, _, value = str(item).partition("=")\n'
+        "        if _sweep_size(value) > 1:",
+        "    for item in []:\n        key, value = '', ''\n        if _sweep_size(value) > 1:",
+        (VISIBLE + "test_a_plain_sweeps_report_names_its_swept_keys",),
+    ),
+    Mutation(
+        "the unreachable-significance note forgets Holm's family",
+        "src/quadest/evaluation/paired.py",
+        "floor = min(1.0, family * smallest_wilcoxon_p(runs))",
+        "floor = min(1.0, smallest_wilcoxon_p(runs))",
+        (VISIBLE + "test_the_paired_line_says_when_its_test_cannot_reach_significance",),
+    ),
+    Mutation(
+        "the closed loop's caption leaves out the smoothers' filtering-bound note",
+        "src/quadest/app/closed_loop_job.py",
+        "            cfg.model.name,\n            results,\n",
+        "            cfg.model.name,\n            [],\n",
+        ("tests/test_captions.py::test_a_job_with_a_smoother_says_its_pcrlb_is_the_filtering_bound",),
+    ),
+    Mutation(
+        "estimator workers outlive a killed job",
+        "src/quadest/app/estimator_runs.py",
+        'mp_context=multiprocessing.get_context("spawn"), **pool_options())',
+        'mp_context=multiprocessing.get_context("spawn"))',
+        ("tests/test_orphans.py::test_killing_a_job_kills_its_estimator_workers",),
+    ),
+    Mutation(
+        "an install inside a clone reports the clone's commit",
+        "src/quadest/app/provenance.py",
+        'return _git("ls-files", "--error-unmatch", Path(__file__).name) is not None',
+        'return _git("rev-parse", "HEAD") is not None',
+        ("tests/test_provenance.py::test_a_non_editable_install_reports_its_build_record_and_says_so",),
     ),
 )  # fmt: skip
 

@@ -1,6 +1,6 @@
 """Regenerate every checked-in result folder, then the reproductions ledger and the docs' result numbers.
 
-Usage, from the repository root (with quadest installed)::
+Usage, from the repository root (with quadest's dependencies installed)::
 
     python tools/regenerate_results.py                 # every folder of results/manifest.yaml, in order
     python tools/regenerate_results.py --only NAME ... # only these folders
@@ -13,11 +13,16 @@ the old folder is deleted once every command succeeded, or put back if one faile
 ``.csv``) and ``python -m quadest.aggregate.doc_numbers`` the result numbers of ``docs/findings.md``
 and ``results/README.md`` (``docs/numbers.yaml``) from the new results. The exit status is
 non-zero if any command failed.
+
+Every command runs this clone's code: ``src/`` goes first on ``PYTHONPATH`` and the script checks
+that ``quadest`` imports from there before running anything (one line and exit status 1 if not),
+so an edit to ``src/`` reaches the regeneration without a reinstall.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import shutil
 import subprocess
@@ -40,21 +45,38 @@ def read_manifest(path: Path = MANIFEST) -> dict[str, list[str]]:
     return manifest
 
 
-def run(command: str) -> bool:
-    """Run one manifest command from the repository root; ``quadest`` and ``python`` are those of
-    this interpreter's environment."""
+def clone_environment(root: Path = ROOT) -> dict[str, str]:
+    """The environment of the commands: this one with the clone's ``src/`` first on ``PYTHONPATH``,
+    so that they run the clone's code whatever copy of quadest is installed (a non-editable
+    install would otherwise serve the code of its build). Refuses with one line if ``quadest``
+    still imports from elsewhere."""
+    path = [str(root / "src"), *filter(None, [os.environ.get("PYTHONPATH")])]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
+    probe = [sys.executable, "-c", "import quadest; print(quadest.__file__)"]
+    done = subprocess.run(probe, cwd=root, env=env, capture_output=True, text=True, check=False)
+    found = Path(done.stdout.strip()).resolve() if done.returncode == 0 else None
+    expected = (root / "src" / "quadest" / "__init__.py").resolve()
+    if found != expected:
+        raise SystemExit(f"regenerate_results: quadest imports from {found or done.stderr.strip()[-200:]}, not "
+                         f"this clone's {expected}; run from the clone whose results you regenerate")  # fmt: skip
+    return env
+
+
+def run(command: str, env: dict[str, str] | None = None) -> bool:
+    """Run one manifest command from the repository root with ``env`` (:func:`clone_environment`);
+    ``quadest`` and ``python`` are those of this interpreter's environment."""
     argv = shlex.split(command)
     if argv[0] == "python":
         argv[0] = sys.executable
     elif argv[0] == "quadest":
         argv = [sys.executable, "-m", "quadest.app.cli", *argv[1:]]
     start = time.perf_counter()
-    done = subprocess.run(argv, cwd=ROOT, check=False)
+    done = subprocess.run(argv, cwd=ROOT, check=False, env=env)
     print(f"  {time.perf_counter() - start:6.0f} s  exit {done.returncode}  {command}", flush=True)
     return done.returncode == 0
 
 
-def regenerate(name: str, commands: list[str]) -> bool:
+def regenerate(name: str, commands: list[str], env: dict[str, str] | None = None) -> bool:
     """Make ``results/name`` afresh; the old folder comes back if a command fails. The folder's
     ``README.md`` files, written by hand to explain a folder (no command makes them), are carried
     over into the new one."""
@@ -63,7 +85,7 @@ def regenerate(name: str, commands: list[str]) -> bool:
     shutil.rmtree(aside, ignore_errors=True)
     if folder.exists():
         folder.rename(aside)
-    ok = all(run(command) for command in commands)
+    ok = all(run(command, env) for command in commands)
     if ok:
         for readme in aside.rglob("README.md") if aside.exists() else ():
             target = folder / readme.relative_to(aside)
@@ -92,9 +114,10 @@ def main(argv: list[str] | None = None) -> int:
         for name in names:
             print(f"{name}:\n" + "".join(f"  {command}\n" for command in manifest[name]), end="")
         return 0
-    failed = [name for name in names if not regenerate(name, manifest[name])]
+    env = clone_environment()
+    failed = [name for name in names if not regenerate(name, manifest[name], env)]
     ok_ledger = all(
-        subprocess.run([sys.executable, "-m", module], cwd=ROOT, check=False).returncode == 0
+        subprocess.run([sys.executable, "-m", module], cwd=ROOT, check=False, env=env).returncode == 0
         for module in ("quadest.aggregate.reproductions", "quadest.aggregate.doc_numbers")
     )
     if failed:

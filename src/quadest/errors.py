@@ -19,6 +19,18 @@ class ConfigError(ValueError):
         self.allowed = allowed
         super().__init__(f"{key}={value!r} is invalid: {allowed}")
 
+    def __reduce__(self):
+        """Pickle by message and fields (a worker process sends it back to the job), whatever
+        arguments a subclass's constructor takes."""
+        return _restore_config_error, (type(self), str(self), self.key, self.value, self.allowed)
+
+
+def _restore_config_error(cls: type, message: str, key: str, value: object, allowed: str) -> ConfigError:
+    exc = cls.__new__(cls)
+    ValueError.__init__(exc, message)
+    exc.key, exc.value, exc.allowed = key, value, allowed
+    return exc
+
 
 class PluginError(ConfigError):
     """A selected plugin (an estimator, a model or a sensor) cannot be used; the message names the

@@ -12,7 +12,7 @@ import yaml
 from quadest.aggregate.compact import CELL_TABLE, write_compact
 from quadest.aggregate.figures import figures
 from quadest.aggregate.statistics import paired_summary, tables, with_confidence_interval
-from quadest.aggregate.sweep import load_paired, load_sweep
+from quadest.aggregate.sweep import load_paired, load_sweep, swept_parameters
 from quadest.aggregate.versus_best import heat_maps, run_scores, ut_parameter, versus_best, versus_best_counts
 from quadest.errors import ConfigError
 from quadest.evaluation.formatting import latex_table, markdown_table, strict_json
@@ -93,7 +93,7 @@ def aggregate(sweep_dir: Path, output: str = "full", wall_time: float | None = N
         "",
         f"- commit: {', '.join(commits) or 'unknown'}",
         f"- command-line overrides: `{' '.join(hydra_cfg.get('overrides', {}).get('task', []) or [])}`",
-        f"- swept: {strict_json((hydra_cfg.get('sweeper') or {}).get('params') or {})}",
+        f"- swept: {strict_json(swept_parameters(sweep_cfg or {}))}",
         f"- jobs: {len(jobs)}; " + ", ".join(f"{k}: {v}" for k, v in jobs["status"].value_counts().items()),
         "- the full config of every job is in `<job>/.hydra/config.yaml`; the sweep's in `multirun.yaml`",
     ]

@@ -54,6 +54,21 @@ def expected_jobs(sweep_dir: Path) -> int | None:
     return int(np.prod(list(sizes.values()))) if sizes else 1
 
 
+def swept_parameters(record: dict) -> dict:
+    """The swept keys of a sweep's ``multirun.yaml`` record and their values: the sweeper's params,
+    then the command-line overrides, which come last and win (as in :func:`expected_jobs`); a key
+    the command line fixes to one value is not swept (``quadest -m alpha=0.1,0.5``: ``{alpha: 0.1,0.5}``)."""
+    hydra = record.get("hydra") or {}
+    values = dict((hydra.get("sweeper") or {}).get("params") or {})
+    for item in (hydra.get("overrides") or {}).get("task") or []:
+        key, _, value = str(item).partition("=")
+        if _sweep_size(value) > 1:
+            values[key] = value
+        else:
+            values.pop(key, None)
+    return values
+
+
 def load_sweep(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
     """(cells, jobs, parameter columns) of a sweep folder."""
     rows, jobs, params = [], [], []

@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
 import sys
+import tempfile
 from pathlib import Path
 
 import hydra
@@ -27,24 +29,19 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.override_parser.types import ValueType
 from hydra.types import RunMode
-from omegaconf import DictConfig, open_dict
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from quadest.app.job import run_validated
+from quadest.app.parent_watch import watch_parent
 from quadest.app.schema import register_schemas
-from quadest.app.validate import validate
+from quadest.app.validate import check_labels, validate
 from quadest.config.paths import config_dir
 from quadest.errors import ConfigError
 from quadest.estimators.registry import discover
 from quadest.evaluation.formatting import strict_json
 from quadest.evaluation.objective import objective_value
-from quadest.evaluation.pcrlb import pcrlb_caption
 
 register_schemas()
-
-
-def has_smoother(cfg: DictConfig) -> bool:
-    """Whether an estimator of ``cfg`` has a smoother (its smoothed row joins the tables)."""
-    return any(node.get("smoother", "none") != "none" for node in cfg.estimator.values())
 
 
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
@@ -55,7 +52,9 @@ def _main(cfg: DictConfig) -> float | None:
     out_dir = Path(hc.runtime.output_dir)
     multirun = hc.mode == RunMode.MULTIRUN
     failed = None if cfg.objective.estimator is None else math.inf
+    watch_parent()  # a launcher's worker (joblib) dies with the sweep's main process
     try:
+        check_labels(list(hc.overrides.task))
         settings = validate(cfg)  # the config, typed once (quadest.app.settings), objective included
         summary = run_validated(cfg, settings, out_dir, list(hc.overrides.task))
     except ConfigError as exc:
@@ -68,13 +67,10 @@ def _main(cfg: DictConfig) -> float | None:
             raise
         _record_failure(out_dir, f"{type(exc).__name__}: {exc}")
         return failed
+    if multirun:
+        _record_cell(f"ok {out_dir}")
     runs = summary.get("labels", {}).get("runs", cfg.runs)  # runs=auto: the runs it made
-    print(
-        f"\n{summary['_caption']}"  # a flight-log replay (docs/replay.md)
-        if "_caption" in summary
-        else f"\nPer-state RMSE, mean ± std over {runs} Monte Carlo runs (per-run RMSE over time; diverged runs "
-        f"excluded).\n{pcrlb_caption(cfg.model.name, smoothed=has_smoother(cfg))}"
-    )
+    print(f"\n{summary['_caption']}")  # quadest.evaluation.captions
     print(summary["_table"].to_string(index=False))
     if "_after_table" in summary:
         print(f"\n{summary['_after_table']}", end="")
@@ -116,6 +112,32 @@ def _record_failure(out_dir: Path, reason: str) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(strict_json({"status": "failed", "error": reason}, indent=2))
     print(f"quadest: job failed: {reason}", file=sys.stderr)
+    _record_cell(f"failed {out_dir}")
+
+
+CELLS_RECORD = "QUADEST_SWEEP_CELLS"
+"""The environment variable naming the file where a sweep's cells, in whichever process a launcher
+runs them, append ``ok DIR`` or ``failed DIR`` (:func:`main` reads it when the sweep ends)."""
+
+SWEEP_FAILED = 3
+"""The exit status of a sweep in which any cell failed (its finished cells are kept)."""
+
+
+def _record_cell(line: str) -> None:
+    record = os.environ.get(CELLS_RECORD)
+    if record:
+        with open(record, "a") as f:
+            f.write(line + "\n")
+
+
+def _exit_if_cells_failed(record: Path) -> None:
+    """After a sweep: exit with :data:`SWEEP_FAILED` and one line if any cell failed."""
+    lines = record.read_text().splitlines() if record.is_file() else []
+    failed = [line.split(" ", 1)[1] for line in lines if line.startswith("failed ")]
+    if failed:
+        print(f"quadest: {len(failed)} of {len(lines)} sweep cells failed (each one's summary.json says why): "
+              f"{', '.join(failed)}", file=sys.stderr)  # fmt: skip
+        sys.exit(SWEEP_FAILED)
 
 
 _HYDRA_FLAGS = {
@@ -162,21 +184,28 @@ def precheck(argv: list[str], primary: Path | None = None) -> None:
     is the experiment file that is the run's primary config (:func:`one_way`), else the root
     config. An experiment that sweeps (``hydra.mode: MULTIRUN``) takes sweeps on the command line
     without ``-m``: each of their values is checked (the other sweeps at their first value); in a
-    single run a sweep is Hydra's "ambiguous value" error."""
-    if any(arg in _HYDRA_FLAGS or arg.startswith("--") for arg in argv):
-        return
+    single run a sweep is Hydra's "ambiguous value" error. With ``-m`` only the sweep's output
+    folder is checked (:func:`check_sweep_dir`); the values are left to each job."""
     folder, name = (str(primary.parent), primary.stem) if primary is not None else (config_dir(), "config")
-    overrides = [a for a in argv if not a.lstrip("+~").startswith(("hydra.", "hydra/"))]
+    hydra_args = [a for a in argv if a.lstrip("+~").startswith(("hydra.", "hydra/"))]
+    flags = [arg for arg in argv if arg in _HYDRA_FLAGS or arg.startswith("--")]
+    if flags and set(flags) <= {"-m", "--multirun"}:
+        check_sweep_dir(folder, name, hydra_args)
+    if flags:
+        return
+    overrides = [a for a in argv if a not in hydra_args]
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=folder, version_base="1.3"):
             for cell in _cells(overrides):
-                cfg = compose(config_name=name, overrides=cell, return_hydra_config=cell != overrides)
-                if cell != overrides:
-                    if cfg.hydra.mode != RunMode.MULTIRUN:
-                        compose(config_name=name, overrides=overrides)  # raises Hydra's "ambiguous value"
-                    with open_dict(cfg):
-                        del cfg["hydra"]
+                cfg = compose(config_name=name, overrides=cell + hydra_args, return_hydra_config=True)
+                sweeps = cfg.hydra.mode == RunMode.MULTIRUN
+                if cell != overrides and not sweeps:
+                    compose(config_name=name, overrides=overrides)  # raises Hydra's "ambiguous value"
+                check_output_dir("hydra.sweep.dir" if sweeps else "hydra.run.dir", cfg)
+                with open_dict(cfg):
+                    del cfg["hydra"]
+                check_labels(cell)
                 validate(cfg)
     except ConfigError as exc:
         _fail(str(exc))
@@ -187,6 +216,33 @@ def precheck(argv: list[str], primary: Path | None = None) -> None:
 
 
 _LISTED = (ValueType.SIMPLE_CHOICE_SWEEP, ValueType.CHOICE_SWEEP, ValueType.RANGE_SWEEP)
+
+
+def check_sweep_dir(folder: str, name: str, hydra_args: list[str]) -> None:
+    """Refuse (one line, exit code 2) a ``-m`` sweep whose ``hydra.sweep.dir`` cannot be made; a
+    config that does not compose is left to Hydra's own message."""
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=folder, version_base="1.3"):
+            cfg = compose(config_name=name, overrides=hydra_args, return_hydra_config=True)
+        check_output_dir("hydra.sweep.dir", cfg)
+    except ConfigError as exc:
+        _fail(str(exc))
+    except Exception:  # Hydra reports its own composition errors when it starts
+        return
+    finally:
+        GlobalHydra.instance().clear()
+
+
+def check_output_dir(key: str, cfg: DictConfig) -> None:
+    """The output folder ``key`` (``hydra.run.dir`` or ``hydra.sweep.dir``) of the composed ``cfg``
+    must be creatable: its nearest existing ancestor a folder this process may write into."""
+    path = Path(OmegaConf.select(cfg, key)).absolute()
+    existing = next(p for p in (path, *path.parents) if p.exists())
+    if not existing.is_dir():
+        raise ConfigError(key, str(path), f"{existing} is not a folder; choose an output folder that can be created")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ConfigError(key, str(path), f"{existing} is not writable; choose a folder you can write into")
 
 
 def _cells(overrides: list[str]) -> list[list[str]]:
@@ -276,7 +332,11 @@ def main() -> None:
     argv, primary = one_way(sys.argv[1:])
     precheck(argv if primary is None else argv[4:], primary)
     sys.argv[1:] = argv
-    _main()
+    with tempfile.TemporaryDirectory(prefix="quadest-cells-") as folder:
+        record = Path(folder) / "cells"
+        os.environ[CELLS_RECORD] = str(record)
+        _main()
+        _exit_if_cells_failed(record)
 
 
 if __name__ == "__main__":

@@ -34,8 +34,9 @@ from quadest.closed_loop.loops import closed_loop_for, controlled_models
 from quadest.closed_loop.quadrotor import QuadrotorLoop
 from quadest.config.closed_loop import validate_loop
 from quadest.estimators.registry import build_estimator
+from quadest.evaluation.captions import table_caption
 from quadest.evaluation.job_tables import metric_tables
-from quadest.evaluation.pcrlb import pcrlb_caption, pcrlb_variances
+from quadest.evaluation.pcrlb import pcrlb_variances
 from quadest.evaluation.plotting import plot_truth_vs_estimate
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult, failed_result
@@ -131,10 +132,13 @@ class ClosedLoopJob:
             "control": control_entries(control_summary),
             "crashes": {name: int(f.crashed.sum()) for name, f in flights.items() if f is not None},
         }  # fmt: skip
-        caption = (
-            f"Per-state RMSE, mean ± std over {runs} Monte Carlo runs, loop={mode}: the controller flies on {FED[mode]}"
-            f".\n{'PCRLB: ' + pcrlb_note if pcrlb_note else pcrlb_caption(cfg.model.name)}"
-            f"\nControl metrics: {out_dir / 'control_table.md'}"
+        caption = table_caption(
+            f"Per-state RMSE, mean ± std over {runs} Monte Carlo runs, loop={mode}: the controller flies on "
+            f"{FED[mode]}.",
+            cfg.model.name,
+            results,
+            None if pcrlb_note is None else f"PCRLB: {pcrlb_note}",
+            [f"Control metrics: {out_dir / 'control_table.md'}"],
         )
         return Report(tables, fields, arrays, caption)
 

@@ -11,7 +11,9 @@ the job's data, or fly it in the control loop) and what its result is when that 
 - **failure isolation**: an estimator that raises, whose result cannot come back from its
   process, or whose process dies, is recorded with :meth:`Work.failed` and the exception text;
   the other estimators' results are kept. After a process died, the estimators still missing run
-  again, each alone in a new process, so that one estimator can only take down itself.
+  again, each alone in a new process, so that one estimator can only take down itself. An
+  estimator that refuses its configuration (:class:`~quadest.errors.ConfigError`) fails the job
+  instead: a failed job, not a divergence.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from typing import Protocol
 import numpy as np
 from tqdm.auto import tqdm
 
+from quadest.app.parent_watch import pool_options
 from quadest.cache.lookup import JobCache
 from quadest.errors import ConfigError
 from quadest.estimators.registry import build_estimator, resolve
@@ -116,9 +119,13 @@ Outcome = tuple[EstimatorResult, bool]
 
 
 def _run_one(work: Work, label: str, node: dict, settings: RunSettings) -> Outcome:
-    """Run one estimator; any exception becomes a failed result with its text."""
+    """Run one estimator; any exception but a :class:`ConfigError` becomes a failed result with its
+    text. A ``ConfigError`` (the estimator refuses its configuration) fails the job: it is no
+    divergence, and no run of that configuration could succeed."""
     try:
         return work.run(label, node, settings), True
+    except ConfigError:
+        raise
     except Exception as exc:  # a broken estimator is recorded, never fatal to the job
         return work.failed(label, f"{type(exc).__name__}: {exc}", settings), False
 
@@ -132,11 +139,17 @@ def _result_key(cache: JobCache, label: str, node: dict, settings: RunSettings) 
 
 
 def run_estimators(
-    work: Work, nodes: dict[str, dict], cache: JobCache, settings: RunSettings, workers: int
+    work: Work,
+    nodes: dict[str, dict],
+    cache: JobCache,
+    settings: RunSettings,
+    workers: int,
+    announce: Callable[[str], None] | None = None,
 ) -> tuple[list[EstimatorResult], dict[str, bool]]:
     """Every estimator's result, in the order of ``nodes`` (label → resolved config), and whether
     each came from the cache (module docstring). A cached result is the object stored by the run
-    that computed it, its ``step_time_us`` included."""
+    that computed it, its ``step_time_us`` included. ``announce(label)`` is called as each
+    estimator that ran is done (a long job's progress lines, :mod:`quadest.app.pipeline`)."""
     keys = {label: _result_key(cache, label, node, settings) for label, node in nodes.items()}
     results = {label: cache.result(keys[label]) for label in nodes}
     from_cache = {label: result is not None for label, result in results.items()}
@@ -149,6 +162,8 @@ def run_estimators(
         results[label], ran = outcome
         if ran:
             cache.keep(keys[label], results[label])
+        if announce is not None:
+            announce(label)
 
     if processes == 1:
         for label, node in todo.items():
@@ -159,7 +174,8 @@ def run_estimators(
 
 
 def _pool(processes: int) -> ProcessPoolExecutor:
-    return ProcessPoolExecutor(max_workers=processes, mp_context=multiprocessing.get_context("spawn"))
+    """Worker processes that die with this one (:mod:`quadest.app.parent_watch`)."""
+    return ProcessPoolExecutor(max_workers=processes, mp_context=multiprocessing.get_context("spawn"), **pool_options())
 
 
 def _in_processes(
@@ -182,6 +198,9 @@ def _in_processes(
                 outcome = future.result()
             except BrokenProcessPool:  # a process died: run what is missing alone, below
                 continue
+            except ConfigError:
+                pool.shutdown(cancel_futures=True)
+                raise
             except Exception as exc:  # e.g. a result that cannot be pickled back
                 outcome = work.failed(label, f"{type(exc).__name__}: {exc}", settings), False
             done(label, outcome)
@@ -192,6 +211,8 @@ def _in_processes(
         with _pool(1) as pool:
             try:
                 outcome = pool.submit(_run_one, work, label, node, settings).result()
+            except ConfigError:
+                raise
             except Exception as exc:  # its process died again: this estimator is the one
                 outcome = work.failed(label, f"{type(exc).__name__}: {exc}", settings), False
         done(label, outcome)

@@ -10,6 +10,7 @@ import numpy as np
 from quadest.app.estimator_runs import OnData
 from quadest.app.pipeline import Finished, Report
 from quadest.app.settings import JobSettings
+from quadest.evaluation.captions import table_caption
 from quadest.evaluation.job_tables import metric_tables
 from quadest.evaluation.metrics import convergence_table
 from quadest.evaluation.pcrlb import pcrlb_variances
@@ -61,7 +62,9 @@ class OpenLoopJob:
             "companion_names": list(data.model.companion_names),
             "measurement_names": list(data.model.measurement_names),
         }  # fmt: skip
-        return Report(tables, fields, arrays)
+        head = (f"Per-state RMSE, mean ± std over {int(cfg.runs)} Monte Carlo runs (per-run RMSE over time; diverged "
+                "runs excluded).")  # fmt: skip
+        return Report(tables, fields, arrays, table_caption(head, self.settings.data.model.name, results))
 
     def _figures(
         self, data: MonteCarloData, results: list[EstimatorResult], arrays: dict, bound: np.ndarray, fig_dir: Path

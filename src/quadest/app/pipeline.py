@@ -13,6 +13,9 @@ summary's own fields, the kind's own files and figures). The output folder's lay
 
 from __future__ import annotations
 
+import itertools
+import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +26,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from quadest.app.estimator_runs import RunSettings, Work, run_estimators
 from quadest.app.provenance import provenance
+from quadest.app.schema import ExperimentConf
 from quadest.app.settings import JobSettings, data_key
+from quadest.app.sizing import is_long
 from quadest.cache.lookup import JobCache
 from quadest.estimators.registry import estimator_parameters
 from quadest.evaluation.formatting import strict_json
@@ -82,10 +87,10 @@ class Report:
     """``metrics.csv``, ``rmse_summary.csv``, ``paired_comparison.csv``, ``rmse_table.md``."""
     fields: dict[str, Any]
     """The kind's own fields of ``summary.json`` (labels, names, notes), in order."""
-    series: dict[str, np.ndarray] = field(default_factory=dict)
+    series: dict[str, np.ndarray]
     """``timeseries.npz`` (none if empty)."""
-    caption: str | None = None
-    """Printed above the table (``None``: the CLI's default caption)."""
+    caption: str
+    """Printed above the table (:func:`quadest.evaluation.captions.table_caption`)."""
     after_table: str | None = None
     """Printed below the table (the replay's differences to its offline reference)."""
 
@@ -111,6 +116,32 @@ class JobKind(Protocol):
         ...
 
 
+@dataclass
+class Progress:
+    """A long job's progress lines on stderr (``quadest: progress: ...``, with the seconds since the
+    job began): when the data is made and as each estimator is done. A job is long from
+    :data:`~quadest.app.sizing.LONG_JOB_RUN_STEPS` run-steps on, and only with ``progress: true``
+    (the per-step bars of a terminal stay as they are)."""
+
+    enabled: bool
+    start: float = field(default_factory=time.perf_counter)
+
+    @classmethod
+    def of(cls, exp: ExperimentConf) -> Progress:
+        simulated = exp.source is None  # a replay is one log
+        return cls(bool(exp.progress) and simulated and is_long(exp.runs, exp.duration, exp.sample_period))
+
+    def line(self, text: str) -> None:
+        if self.enabled:
+            print(f"quadest: progress: {text} ({time.perf_counter() - self.start:.0f} s)", file=sys.stderr, flush=True)
+
+    def estimator_done(self, total: int) -> Callable[[str], None] | None:
+        if not self.enabled:
+            return None
+        count = itertools.count(1)
+        return lambda label: self.line(f"{label} done, {next(count)} of {total} estimators")
+
+
 def run_pipeline(
     kind: JobKind, job: JobSettings, cfg: DictConfig, out_dir: Path, overrides: list[str] | None = None
 ) -> dict:
@@ -118,14 +149,18 @@ def run_pipeline(
     write every output into ``out_dir``. ``cfg`` itself is only written (``config.yaml``) and hashed
     into the data key (:func:`quadest.app.settings.data_key`); everything else reads ``job``.
     Returns the JSON summary, with the printed table (``_table``), the paired lines (``_paired``)
-    and, where the kind has them, the caption (``_caption``) and the text below the table
+    the caption (``_caption``) and, where the kind has it, the text below the table
     (``_after_table``) for the CLI."""
     out_dir = start_job(cfg, out_dir)
     exp = job.experiment
     cache = JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)
+    progress = Progress.of(exp)
+    progress.line(f"making the data: {exp.runs} runs of {exp.duration:g} s at sample_period={exp.sample_period:g} s")
     data, data_from_cache = cache.data(kind.make_data) if kind.caches_data else (kind.make_data(), False)
     settings = run_settings(job, int(exp.runs))
-    results, from_cache = run_estimators(kind.work(data), exp.estimator, cache, settings, int(exp.workers))
+    progress.line(f"running {len(exp.estimator)} estimator(s)")
+    results, from_cache = run_estimators(kind.work(data), exp.estimator, cache, settings, int(exp.workers),
+                                         progress.estimator_done(len(exp.estimator)))  # fmt: skip
     return finish_job(kind, job, out_dir, overrides, Ran(data, data_from_cache, results, from_cache, cache.derived))
 
 
@@ -180,8 +215,7 @@ def finish_job(kind: JobKind, job: JobSettings, out_dir: Path, overrides: list[s
     write_summary(out_dir, summary)
     summary["_table"] = report.tables.printed
     summary["_paired"] = summary_lines(report.tables.paired)
-    if report.caption is not None:
-        summary["_caption"] = report.caption
+    summary["_caption"] = report.caption
     if report.after_table is not None:
         summary["_after_table"] = report.after_table
     return summary

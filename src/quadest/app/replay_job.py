@@ -39,6 +39,7 @@ import pandas as pd
 from quadest.app.open_loop_job import OpenLoopJob
 from quadest.app.pipeline import Finished, Report
 from quadest.app.schema import ExperimentConf
+from quadest.evaluation.captions import table_caption
 from quadest.evaluation.formatting import markdown_table
 from quadest.evaluation.job_tables import MetricTables
 from quadest.evaluation.metrics import estimator_overview, parameter_columns, summarize
@@ -139,14 +140,15 @@ def _difference_markdown(table: pd.DataFrame) -> str:
     return "\n".join(blocks)
 
 
-def caption(data: MonteCarloData) -> str:
-    """The line printed above the table."""
+def caption(data: MonteCarloData, results: list[EstimatorResult]) -> str:
+    """The lines printed above the table (:func:`~quadest.evaluation.captions.table_caption`; a
+    replay has no PCRLB column, :data:`NOT_APPLICABLE` says why)."""
     lab = data.labels
-    return (
+    head = (
         f"RMS difference to the {lab['reference']} (vehicle_attitude) of {lab['log']}, degrees, from "
-        f"t = {data.time[0] + lab['warmup']:g} s to {data.time[-1]:.1f} s (one log: no Monte Carlo spread).\n"
-        f"{NOT_APPLICABLE}"
+        f"t = {data.time[0] + lab['warmup']:g} s to {data.time[-1]:.1f} s (one log: no Monte Carlo spread)."
     )
+    return table_caption(head, lab["model"], results, NOT_APPLICABLE)
 
 
 def plot_replay(data: MonteCarloData, angles: dict[str, np.ndarray], reference: np.ndarray, fig_dir: Path) -> None:
@@ -218,7 +220,7 @@ class ReplayJob(OpenLoopJob):
         overview = overview.drop(columns=["mean_nees", "nees_dof", "nees_in_band"])
         printed = _printed(summary_table)
         paired = paired_comparison(table, int(cfg.seed))
-        tables = MetricTables(table, summary_table, overview, printed, paired, preamble=caption(data) + "\n\n")
+        tables = MetricTables(table, summary_table, overview, printed, paired, preamble=caption(data, results) + "\n\n")
         ref_angles = euler_deg(reference)
         angles = {res.name: euler_deg(res.saved["estimate"][0]) for res in results}
         arrays = {"time": data.time, "reference": reference, "reference_angles_deg": ref_angles}
@@ -255,4 +257,4 @@ class ReplayJob(OpenLoopJob):
                 for reference, by_reference in to_smoothed.groupby("reference", sort=False)
             }  # fmt: skip
         after = _difference_markdown(to_smoothed) if offline else None
-        return Report(tables, fields, arrays, caption(data), after)
+        return Report(tables, fields, arrays, caption(data, results), after)

@@ -12,9 +12,11 @@ import dataclasses
 
 from omegaconf import DictConfig
 
+from quadest.app.estimator_runs import resolve_workers
 from quadest.app.schema import ExperimentConf, check_known_keys
 from quadest.app.sequential_runs import validate_runs
 from quadest.app.settings import JobSettings, job_settings
+from quadest.app.sizing import check_size, duration_problem
 from quadest.cache.location import validate_cache
 from quadest.config.ranges import require_non_negative, require_positive
 from quadest.config.settings import DataSettings
@@ -36,6 +38,9 @@ def validate_run(experiment: ExperimentConf) -> None:
     if experiment.seed < 0:
         raise ConfigError("seed", experiment.seed, "must be an integer >= 0")
     require_positive("sample_period", experiment.sample_period, "must be > 0 seconds")
+    problem = None if experiment.source is not None else duration_problem(experiment.duration, experiment.sample_period)
+    if problem is not None:  # a replay's duration may be .inf: to the log's end
+        raise ConfigError("duration", experiment.duration, problem)
     if not experiment.duration >= experiment.sample_period:
         raise ConfigError(
             "duration",
@@ -113,6 +118,29 @@ def validate_estimators(experiment: ExperimentConf, settings: DataSettings) -> N
             )
 
 
+def validate_size(experiment: ExperimentConf, settings: DataSettings) -> None:
+    """The job's memory floor against the machine's (:func:`quadest.app.sizing.check_size`)."""
+    nodes = experiment.estimator
+    smoothers = sum(node.get("smoother", "none") != "none" for node in nodes.values())
+    processes = resolve_workers(experiment.workers, len(nodes))
+    check_size(experiment.runs, experiment.duration, experiment.sample_period, state_dimension(settings), len(nodes),
+               processes, experiment.output.saved_runs, smoothers)  # fmt: skip
+
+
+def check_labels(overrides: list[str]) -> None:
+    """An estimator selected twice (``estimator=[srukf,srukf]``) would run once under one label:
+    refused. A second copy takes a label of its own (``+estimator.srukf_b.kind=srukf``, docs/usage.md)."""
+    for override in overrides:
+        key, _, value = override.partition("=")
+        if key.lstrip("+~") != "estimator" or not value.startswith("["):
+            continue
+        names = [v.strip() for v in value.strip("[]").split(",") if v.strip()]
+        twice = sorted({name for name in names if names.count(name) > 1})
+        if twice:
+            raise ConfigError("estimator", value, f"{', '.join(twice)} selected twice (one label runs once); give a "
+                              f"second copy a label of its own: +estimator.{twice[0]}_b.kind={twice[0]}")  # fmt: skip
+
+
 def validate(cfg: DictConfig) -> JobSettings:
     """Check every range constraint of a composed config; raise :class:`ConfigError` on the first.
 
@@ -128,6 +156,8 @@ def validate(cfg: DictConfig) -> JobSettings:
     if experiment.source is not None:
         validate_replay(data, experiment.output.saved_runs)
     validate_estimators(experiment, data)
+    if experiment.source is None:  # a replay is one log of known length
+        validate_size(experiment, data)
     validate_cache(experiment.cache)
     validate_objective(experiment.objective, list(experiment.estimator))
     return settings

@@ -88,8 +88,27 @@ def parameter_problem(params_cls: type | None, values: Mapping[str, Any], n: int
 
 
 def unscented_constraints(values: Mapping[str, Any], n: int) -> list[tuple[str, Any, str]]:
-    """The UT's points are real only when ``n + λ = α² (n + κ) > 0`` (thesis eqs 5.2–5.6)."""
+    """The UT's points are real only when ``n + λ = α² (n + κ) > 0`` (thesis eqs 5.2–5.6), checked in
+    floating point exactly as the filter computes it (:func:`quadest.numerics.sigma_points.ut_weights`:
+    ``λ = α² (n + κ) − n``, then ``n + λ``). With ``n + κ > 0`` and ``n + λ`` still not > 0, α is too
+    small: ``α² (n + κ)`` is lost in the rounding of ``n`` (or underflows), and the key named is alpha."""
     alpha, kappa = values.get("alpha"), values.get("kappa", 0.0)
-    if alpha is not None and not alpha**2 * (n + kappa) > 0:
+    if alpha is None:
+        return []
+    lam = alpha**2 * (n + kappa) - n
+    if n + lam > 0:
+        return []
+    if not n + kappa > 0:
         return [("kappa", kappa, f"n + lambda = alpha^2 (n + kappa) must be > 0, so kappa > {-n} for n={n}")]
-    return []
+    return [("alpha", alpha, f"too small: n + lambda = alpha^2 (n + kappa) computes to {n + lam:g} in floating "
+             f"point for n={n}, kappa={kappa:g} (alpha^2 (n + kappa) is lost next to n); alpha >= "
+             f"{smallest_alpha(n, kappa):.2g} works")]  # fmt: skip
+
+
+def smallest_alpha(n: int, kappa: float) -> float:
+    """An α (two significant digits, rounded up) for which ``n + λ > 0`` in floating point, given
+    ``n + κ > 0``: ``α² (n + κ)`` must exceed the spacing of floats at ``n``."""
+    alpha = float(f"{math.sqrt(2 * math.ulp(float(n)) / (n + kappa)):.2g}")
+    while not n + (alpha**2 * (n + kappa) - n) > 0:
+        alpha = float(f"{alpha * 1.1:.2g}")
+    return alpha

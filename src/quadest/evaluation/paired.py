@@ -183,6 +183,7 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
     ``srukf - ekf: 2 of 12 states differ (Wilcoxon, Holm p < 0.05); vx -0.42 % [-0.61, -0.20],
     p_holm 0.001; 50 runs``."""
     lines = []
+    family = int(table["p_wilcoxon"].notna().sum())  # the tests Holm's adjustment runs over
     for pair, rows in table.groupby("pair", sort=False):
         runs, excluded = int(rows["runs"].iloc[0]), int(rows["excluded_runs"].iloc[0])
         used = f"{runs} runs" + (f" ({excluded} excluded: diverged in either)" if excluded else "")
@@ -196,8 +197,35 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
             f"{pair}: {significant} of {len(rows)} states differ (Wilcoxon, Holm p < {SIGNIFICANCE:g}); "
             f"{best['state']} {100 * best['rel_diff']:+.3g} % [{100 * best['rel_ci_low']:+.3g}, "
             f"{100 * best['rel_ci_high']:+.3g}], p_holm {best['p_wilcoxon_holm']:.2g}; {used}"
+            + _unreachable(runs, family)
         )
     return lines
+
+
+def smallest_wilcoxon_p(n: int) -> float:
+    """The smallest two-sided p-value of the exact Wilcoxon signed-rank test on ``n`` non-zero
+    differences: all of one sign, each of the ``2ⁿ`` sign patterns being equally likely under the
+    null hypothesis (Wilcoxon 1945), so ``p = 2 · 2⁻ⁿ`` (1 for n ≤ 1)."""
+    return min(1.0, 2.0 ** (1 - n))
+
+
+def runs_to_reach(family: int, level: float = SIGNIFICANCE) -> int:
+    """The fewest runs at which the smallest Holm-adjusted Wilcoxon p over ``family`` tests
+    (``family · 2 · 2⁻ⁿ``, :func:`smallest_wilcoxon_p`: Holm multiplies the smallest p by the family
+    size) falls below ``level``."""
+    n = 1
+    while family * smallest_wilcoxon_p(n) >= level:
+        n += 1
+    return n
+
+
+def _unreachable(runs: int, family: int) -> str:
+    """The note of a summary line whose test cannot reach significance at its run count ('' if it can)."""
+    floor = min(1.0, family * smallest_wilcoxon_p(runs))
+    if floor < SIGNIFICANCE:
+        return ""
+    return (f"; at {runs} runs no state can differ: the smallest attainable Holm p over {family} tests is {floor:.2g} "
+            f"(Wilcoxon's 2/2^{runs}), >= {SIGNIFICANCE:g} (needs >= {runs_to_reach(family)} runs)")  # fmt: skip
 
 
 def paired_markdown(table: pd.DataFrame) -> str:

@@ -57,6 +57,12 @@ class AlignedLog:
     longest_gap: float
 
 
+def common_span(log: FlightLog) -> tuple[float, float]:
+    """The first and the last time at which the IMU and the reference both have samples."""
+    t0 = max(log.imu_time[0], log.accel_time[0], log.reference_time[0])
+    return t0, min(log.imu_time[-1], log.accel_time[-1], log.reference_time[-1])
+
+
 def align(log: FlightLog, period: float, start: float = 0.0, duration: float = float("inf")) -> AlignedLog:
     """Resample ``log`` onto ``t_k = t0 + start + k·period`` for at most ``duration`` seconds.
 
@@ -64,8 +70,8 @@ def align(log: FlightLog, period: float, start: float = 0.0, duration: float = f
     at the last such time (or after ``duration``). Raises :class:`ConfigError` when the window
     holds fewer than two steps.
     """
-    t0 = max(log.imu_time[0], log.accel_time[0], log.reference_time[0])
-    t_end = min(log.imu_time[-1], log.accel_time[-1], log.reference_time[-1], t0 + start + duration)
+    t0, t_last = common_span(log)
+    t_end = min(t_last, t0 + start + duration)
     steps = int(np.floor((t_end - t0 - start) / period + 1e-9))
     if steps < 1:
         raise ConfigError(

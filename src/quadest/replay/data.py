@@ -30,12 +30,14 @@ aligned log (:mod:`quadest.replay.align`), in PX4's frames (body FRD, earth NED)
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from quadest.config.notices import warn
 from quadest.config.ranges import require_non_negative
 from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
@@ -44,8 +46,8 @@ from quadest.models.quadrotor_config import triad_spec
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.streams import run_seed_sequences
 from quadest.numerics import quaternion as quat
-from quadest.replay.align import AlignedLog, align
-from quadest.replay.ulog import read_flight_log
+from quadest.replay.align import AlignedLog, align, common_span
+from quadest.replay.ulog import incomplete_tail, read_flight_log
 from quadest.sensors.mimu import TriadSpec
 from quadest.sensors.record import SensorRecord
 
@@ -93,8 +95,33 @@ def validate_replay(settings: DataSettings, saved_runs: int) -> None:
         raise ConfigError("source.name", source.name, "'px4' (a PX4 ULog file), or source=null to simulate")
     require_non_negative("source.start", source.start)
     require_non_negative("source.warmup", source.warmup)
-    if not log_path(source.path).is_file():
+    path = log_path(source.path)
+    if not path.is_file():
         raise ConfigError("source.path", str(source.path), "an existing PX4 ULog file (.ulg), or null: the shipped log")
+    check_log_length(path, settings)
+
+
+def check_log_length(path: Path, settings: DataSettings) -> None:
+    """Refuse a ``source.warmup`` that reaches past the end of the replayed window (nothing would be
+    compared), and name in a warning a log cut mid-message (:func:`~quadest.replay.ulog.incomplete_tail`)
+    or one shorter than the ``duration`` asked for."""
+    source = settings.source
+    t0, t_end = common_span(read_flight_log(path))
+    held = t_end - t0 - source.start  # seconds of IMU and attitude data after source.start
+    if not held > settings.sample_period:
+        raise ConfigError("source.start", source.start, f"a time inside the log ({path.name} holds {t_end - t0:.3f} s "
+                          "of IMU and attitude data)")  # fmt: skip
+    window = min(held, settings.duration)
+    if not source.warmup < window:
+        raise ConfigError("source.warmup", source.warmup, f"less than the {window:.3f} s replayed ({path.name} holds "
+                          f"{t_end - t0:.3f} s of IMU and attitude data, source.start={source.start:g})")  # fmt: skip
+    cut = incomplete_tail(path)
+    if cut:
+        warn(f"{path} ends in {cut} bytes of an incomplete message: the log was truncated; replaying its "
+             f"{t_end - t0:.3f} s of IMU and attitude data")  # fmt: skip
+    if math.isfinite(settings.duration) and held < settings.duration:
+        warn(f"{path} holds {held:.3f} s after source.start={source.start:g}, less than "
+             f"duration={settings.duration:g}; replaying to its end")  # fmt: skip
 
 
 def tilt(accel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

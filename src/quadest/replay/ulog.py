@@ -172,3 +172,23 @@ def _sample_stamps(msg: dict) -> np.ndarray:
 
 def _seconds(stamps_us: np.ndarray) -> np.ndarray:
     return np.asarray(stamps_us, dtype=np.int64) * 1e-6
+
+
+ULOG_HEADER_BYTES = 16  # magic (7), version (1), timestamp (8)
+MESSAGE_HEADER_BYTES = 3  # msg_size (uint16, little endian), msg_type (uint8)
+
+
+def incomplete_tail(path: str | Path) -> int:
+    """Bytes at the end of a ULog file that do not make a whole message: 0 for a file that ends on
+    a message boundary, > 0 for one cut while a message was written (a copy or a download that
+    stopped, a logger that lost power). Every message after the 16-byte file header starts with its
+    size and type (the ULog file format of PX4's documentation, "Message Header"); pyulog reads up
+    to the last whole message without a word, so the cut is found by walking the headers."""
+    data = Path(path).read_bytes()
+    offset = ULOG_HEADER_BYTES
+    while offset < len(data):
+        end = offset + MESSAGE_HEADER_BYTES + int.from_bytes(data[offset : offset + 2], "little")
+        if offset + MESSAGE_HEADER_BYTES > len(data) or end > len(data):
+            return len(data) - offset
+        offset = end
+    return 0
