@@ -13,7 +13,7 @@ import dataclasses
 from omegaconf import DictConfig
 
 from quadest.app.estimator_runs import resolve_workers
-from quadest.app.schema import ExperimentConf, check_known_keys
+from quadest.app.schema import ExperimentConf, check_known_keys, is_auto
 from quadest.app.sequential_runs import validate_runs
 from quadest.app.settings import JobSettings, job_settings
 from quadest.app.sizing import check_size, duration_problem
@@ -119,11 +119,13 @@ def validate_estimators(experiment: ExperimentConf, settings: DataSettings) -> N
 
 
 def validate_size(experiment: ExperimentConf, settings: DataSettings) -> None:
-    """The job's memory floor against the machine's (:func:`quadest.app.sizing.check_size`)."""
+    """The job's memory floor against the machine's (:func:`quadest.app.sizing.check_size`); a
+    ``runs=auto`` job is sized at its budget ``decision.max_runs``, the most runs it can hold."""
     nodes = experiment.estimator
+    runs = experiment.decision.max_runs if is_auto(experiment.runs) else experiment.runs
     smoothers = sum(node.get("smoother", "none") != "none" for node in nodes.values())
     processes = resolve_workers(experiment.workers, len(nodes))
-    check_size(experiment.runs, experiment.duration, experiment.sample_period, state_dimension(settings), len(nodes),
+    check_size(runs, experiment.duration, experiment.sample_period, state_dimension(settings), len(nodes),
                processes, experiment.output.saved_runs, smoothers)  # fmt: skip
 
 
