@@ -622,6 +622,47 @@ MUTATIONS = (
     ),
 )  # fmt: skip
 
+B_SMOOTHING = "tests/test_behaviours_smoothing.py::"
+B_PIPELINE = "tests/test_behaviours_pipeline.py::"
+
+MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test covering their code
+    Mutation(
+        "FFBSi weighs a backward step with the input of the step it leaves",
+        "src/quadest/estimators/particle_smoothing.py",
+        "cloud, u_next = clouds[k], clouds[k + 1].input",
+        "cloud, u_next = clouds[k], clouds[k].input",
+        (B_SMOOTHING + "test_ffbsi_draws_each_backward_step_through_the_transition_into_the_next_step",),
+    ),
+    Mutation(
+        "a particle filter's smoother cloud keeps the measurement's input",
+        "src/quadest/estimators/particle.py",
+        "ParticleCloud(x_new.copy(), w.copy(), self._u_prev.copy())",
+        "ParticleCloud(x_new.copy(), w.copy(), u.copy())",
+        (B_SMOOTHING + "test_every_particle_filter_keeps_the_input_of_the_transition_into_its_cloud",),
+    ),
+    Mutation(
+        "a smoothed row never marked from the cache",
+        "src/quadest/app/pipeline.py",
+        "row_cache[result.smoothed.name] = row_cache.get(result.name, False)",
+        "row_cache[result.smoothed.name] = row_cache.get(result.smoothed.name, False)",
+        (B_PIPELINE + "test_a_smoothed_row_is_marked_from_cache_exactly_as_its_filters_row",),
+    ),
+    Mutation(
+        "work sent to worker processes whether or not it pickles",
+        "src/quadest/app/estimator_runs.py",
+        "return processes if processes == 1 or work.shippable() else 1",
+        "return processes",
+        (B_PIPELINE + "test_work_whose_model_cannot_be_pickled_runs_in_the_jobs_own_process",),
+    ),
+    Mutation(
+        "the open loop's work called shippable without checking its model",
+        "src/quadest/app/estimator_runs.py",
+        "        return picklable(self.data.model)",
+        "        return True",
+        (B_PIPELINE + "test_work_whose_model_cannot_be_pickled_runs_in_the_jobs_own_process",),
+    ),
+)  # fmt: skip
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""
