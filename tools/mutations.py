@@ -624,6 +624,7 @@ MUTATIONS = (
 
 B_SMOOTHING = "tests/test_behaviours_smoothing.py::"
 B_PIPELINE = "tests/test_behaviours_pipeline.py::"
+B_KERNELS = "tests/test_behaviours_kernels.py::"
 
 MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test covering their code
     Mutation(
@@ -660,6 +661,27 @@ MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test coverin
         "        return picklable(self.data.model)",
         "        return True",
         (B_PIPELINE + "test_work_whose_model_cannot_be_pickled_runs_in_the_jobs_own_process",),
+    ),
+    Mutation(
+        "the compiled quadrotor f with (Iy − Ix) in the yaw equation",
+        "src/quadest/models/quadrotor_kernels.py",
+        "wd2 = ((ix - iy) * wp * wq",
+        "wd2 = ((iy - ix) * wp * wq",
+        (B_KERNELS + "test_quadrotor_kernels_equal_numpy_with_randomised_parameters",),
+    ),
+    Mutation(
+        "the compiled quadrotor h with the x-axis drag on the y axis",
+        "src/quadest/models/quadrotor_kernels.py",
+        "kt0 * x[b, k, 0], kt1 * x[b, k, 1]",
+        "kt0 * x[b, k, 0], kt0 * x[b, k, 1]",
+        (B_KERNELS + "test_quadrotor_kernels_equal_numpy_with_randomised_parameters",),
+    ),
+    Mutation(
+        "the compiled log-density sums 8 terms left to right",
+        "src/quadest/numerics/particle_kernels.py",
+        "        if r < 8:  # numpy sums fewer",
+        "        if r <= 8:  # numpy sums fewer",
+        (B_KERNELS + "test_compiled_diagonal_log_density_is_numpys_bit_for_bit_in_every_dimension",),
     ),
 )  # fmt: skip
 
