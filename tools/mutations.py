@@ -625,6 +625,7 @@ MUTATIONS = (
 B_SMOOTHING = "tests/test_behaviours_smoothing.py::"
 B_PIPELINE = "tests/test_behaviours_pipeline.py::"
 B_KERNELS = "tests/test_behaviours_kernels.py::"
+B_STATISTICS = "tests/test_behaviours_statistics.py::"
 
 MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test covering their code
     Mutation(
@@ -682,6 +683,84 @@ MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test coverin
         "        if r < 8:  # numpy sums fewer",
         "        if r <= 8:  # numpy sums fewer",
         (B_KERNELS + "test_compiled_diagonal_log_density_is_numpys_bit_for_bit_in_every_dimension",),
+    ),
+    Mutation(
+        'the paired summary line counts raw p-values',
+        "src/quadest/evaluation/paired.py",
+        'significant = int((tested["p_wilcoxon_holm"] < SIGNIFICANCE).sum())',
+        'significant = int((tested["p_wilcoxon"] < SIGNIFICANCE).sum())',
+        (B_STATISTICS + "test_the_count_of_differing_states_uses_holm_adjusted_p_values",),
+    ),
+    Mutation(
+        "the sweep's paired summary counts raw p-values",
+        "src/quadest/aggregate/statistics.py",
+        "{int((tested['p_wilcoxon_holm'] < SIGNIFICANCE).sum())} of",
+        "{int((tested['p_wilcoxon'] < SIGNIFICANCE).sum())} of",
+        (B_STATISTICS + "test_the_count_of_differing_states_uses_holm_adjusted_p_values",),
+    ),
+    Mutation(
+        "the relative difference's bootstrap divides by another resample's reference",
+        "src/quadest/evaluation/paired.py",
+        'boot_d, boot_ref = weights @ d, weights @ b',
+        'boot_d, boot_ref = weights @ d, weights[::-1] @ b',
+        (B_STATISTICS + "test_the_paired_comparisons_relative_ci_is_a_paired_bootstrap_of_the_ratio",),
+    ),
+    Mutation(
+        "the particle-count relative difference divides by another resample's reference",
+        "src/quadest/aggregate/particle_count.py",
+        'boot_d, boot_b = weights @ (after - before), weights @ before',
+        'boot_d, boot_b = weights @ (after - before), weights[::-1] @ before',
+        (B_STATISTICS + "test_the_particle_count_intervals_are_paired_bootstraps_of_the_ratio",),
+    ),
+    Mutation(
+        "the particle-count ratio divides by another resample's denominator",
+        "src/quadest/aggregate/particle_count.py",
+        'boot = (weights @ numerator) / (weights @ denominator)',
+        'boot = (weights @ numerator) / (weights[::-1] @ denominator)',
+        (B_STATISTICS + "test_the_particle_count_intervals_are_paired_bootstraps_of_the_ratio",),
+    ),
+    Mutation(
+        'a ranking step signed by the reference instead of the estimator',
+        "src/quadest/aggregate/ranking.py",
+        'sign = 1.0 if est == better else -1.0',
+        'sign = 1.0 if ref == better else -1.0',
+        (B_STATISTICS + "test_a_ranking_steps_sign_and_verdict_do_not_depend_on_the_estimator_order",),
+    ),
+    Mutation(
+        'a ranking verdict read from the unsigned difference',
+        "src/quadest/aggregate/ranking.py",
+        '("yes" if rel < 0 else',
+        '("yes" if r["rel_diff"] < 0 else',
+        (B_STATISTICS + "test_a_ranking_steps_sign_and_verdict_do_not_depend_on_the_estimator_order",),
+    ),
+    Mutation(
+        "the aggregate tables' 95 % interval with the 0.95 t quantile",
+        "src/quadest/aggregate/statistics.py",
+        'student_t.ppf(0.975, (n - 1)',
+        'student_t.ppf(0.95, (n - 1)',
+        (B_STATISTICS + "test_the_aggregate_tables_95_percent_interval_covers_95_percent",
+         B_STATISTICS + "test_the_particle_count_series_95_percent_interval_covers_95_percent",),
+    ),
+    Mutation(
+        "the control tables' 95 % interval with the ddof=0 standard deviation",
+        "src/quadest/closed_loop/control_metrics.py",
+        'half = float(student_t.ppf(0.975, v.size - 1) * v.std(ddof=1)',
+        'half = float(student_t.ppf(0.975, v.size - 1) * v.std()',
+        (B_STATISTICS + "test_the_closed_loop_control_tables_95_percent_intervals_cover_95_percent",),
+    ),
+    Mutation(
+        'the sweep-versus-best paired interval at 90 %',
+        "src/quadest/aggregate/versus_best.py",
+        'half = student_t.ppf(0.5 + CONFIDENCE / 2, n - 1)',
+        'half = student_t.ppf(CONFIDENCE, n - 1)',
+        (B_STATISTICS + "test_the_paired_and_step_time_95_percent_intervals_cover_95_percent",),
+    ),
+    Mutation(
+        "the step-time ratio's interval with a normal quantile",
+        "src/quadest/aggregate/ranking.py",
+        'half = stats.t.ppf(0.5 + CONFIDENCE / 2, n - 1)',
+        'half = stats.norm.ppf(0.5 + CONFIDENCE / 2)',
+        (B_STATISTICS + "test_the_paired_and_step_time_95_percent_intervals_cover_95_percent",),
     ),
 )  # fmt: skip
 
