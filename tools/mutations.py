@@ -626,6 +626,9 @@ B_SMOOTHING = "tests/test_behaviours_smoothing.py::"
 B_PIPELINE = "tests/test_behaviours_pipeline.py::"
 B_KERNELS = "tests/test_behaviours_kernels.py::"
 B_STATISTICS = "tests/test_behaviours_statistics.py::"
+B_CONFIG = "tests/test_behaviours_config.py::"
+B_SENSORS = "tests/test_behaviours_sensors.py::"
+B_CLOSED_LOOP = "tests/test_behaviours_closed_loop.py::"
 
 MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test covering their code
     Mutation(
@@ -761,6 +764,55 @@ MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test coverin
         'half = stats.t.ppf(0.5 + CONFIDENCE / 2, n - 1)',
         'half = stats.norm.ppf(0.5 + CONFIDENCE / 2)',
         (B_STATISTICS + "test_the_paired_and_step_time_95_percent_intervals_cover_95_percent",),
+    ),
+    Mutation(
+        "a scenario's transition_time left unchecked",
+        "src/quadest/app/validate.py",
+        '"spin_up_time", "transition_time", "approach_time")',
+        '"spin_up_time", "approach_time")',
+        (B_CONFIG + "test_a_transition_time_that_is_not_positive_is_refused_before_any_work",),
+    ),
+    Mutation(
+        "the GPS R adds the drift's standard deviation",
+        "src/quadest/sensors/gps.py",
+        'R[0:3, 0:3] += spec.position_drift**2 * np.eye(3)',
+        'R[0:3, 0:3] += spec.position_drift * np.eye(3)',
+        (B_SENSORS + "test_the_gps_r_adds_the_drifts_variance_to_the_white_noises",),
+    ),
+    Mutation(
+        "the camera's field of view reads the image size as height x width",
+        "src/quadest/sensors/vision.py",
+        '    width, height = spec.image_size\n    x, y, z',
+        '    height, width = spec.image_size\n    x, y, z',
+        (B_SENSORS + "test_the_cameras_field_of_view_is_width_by_height",),
+    ),
+    Mutation(
+        "the camera's principal point reads the image size as height x width",
+        "src/quadest/sensors/vision.py",
+        '    centre = 0.5 * np.asarray(spec.image_size, dtype=float)\n    values',
+        '    centre = 0.5 * np.asarray(spec.image_size[::-1], dtype=float)\n    values',
+        (B_SENSORS + "test_the_cameras_field_of_view_is_width_by_height",),
+    ),
+    Mutation(
+        'the estimate-fed quadrotor loop predicts with the inputs of step k',
+        "src/quadest/closed_loop/feedback.py",
+        'self.tracker.step(k, self.u_prev, u_now, plant.mimu()',
+        'self.tracker.step(k, u_now, u_now, plant.mimu()',
+        (B_CLOSED_LOOP + "test_the_closed_loop_filter_predicts_with_the_inputs_of_the_previous_step",),
+    ),
+    Mutation(
+        "seed 003's EKF in predicts with the inputs of step k",
+        "src/quadest/closed_loop/seed003.py",
+        'self.tracker.step(k, self.u_prev, u_now, self.measurement(plant)',
+        'self.tracker.step(k, u_now, u_now, self.measurement(plant)',
+        (B_CLOSED_LOOP + "test_the_closed_loop_filter_predicts_with_the_inputs_of_the_previous_step",),
+    ),
+    Mutation(
+        "seed 003's state sensor with the rate sigma on theta",
+        "src/quadest/models/seed003_attitude.py",
+        'np.array([s.angle, s.angle, s.rate, s.rate, s.rate])',
+        'np.array([s.angle, s.rate, s.angle, s.rate, s.rate])',
+        (B_CLOSED_LOOP + "test_seed003s_state_sensor_puts_the_angle_sigma_on_angles_and_the_rate_sigma_on_rates",),
     ),
 )  # fmt: skip
 
