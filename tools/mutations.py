@@ -629,6 +629,7 @@ B_STATISTICS = "tests/test_behaviours_statistics.py::"
 B_CONFIG = "tests/test_behaviours_config.py::"
 B_SENSORS = "tests/test_behaviours_sensors.py::"
 B_CLOSED_LOOP = "tests/test_behaviours_closed_loop.py::"
+B_REPLAY = "tests/test_behaviours_replay.py::"
 
 MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test covering their code
     Mutation(
@@ -813,6 +814,20 @@ MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test coverin
         'np.array([s.angle, s.angle, s.rate, s.rate, s.rate])',
         'np.array([s.angle, s.rate, s.angle, s.rate, s.rate])',
         (B_CLOSED_LOOP + "test_seed003s_state_sensor_puts_the_angle_sigma_on_angles_and_the_rate_sigma_on_rates",),
+    ),
+    Mutation(
+        'a ULog topic read from the instance listed first',
+        "src/quadest/replay/ulog.py",
+        'if d.name not in topics or d.multi_id < topics[d.name][0]:',
+        'if d.name not in topics:',
+        (B_REPLAY + "test_a_topic_logged_by_several_instances_is_read_from_instance_0",),
+    ),
+    Mutation(
+        "the replay's magnetometer R at the filter's step",
+        "src/quadest/replay/data.py",
+        'Q, R_acc, R_mag, P0 = replay_noise(settings, T, mag_period,',
+        'Q, R_acc, R_mag, P0 = replay_noise(settings, T, T,',
+        (B_REPLAY + "test_the_replays_magnetometer_r_uses_the_magnetometers_own_sample_period",),
     ),
 )  # fmt: skip
 
