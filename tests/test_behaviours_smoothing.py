@@ -10,6 +10,8 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import pytest
 
@@ -22,6 +24,7 @@ RUNS, PARTICLES, STEPS, TRAJECTORIES = 2, 4, 4, 20000
 Z = 4.5  # |error| / standard error bound per smoothed coordinate (two-sided 7e-6 each)
 
 
+@cache
 def model_data(name: str):
     return build_data(compose_settings([f"model={name}", f"runs={RUNS}", "duration=0.5", "progress=false"]))
 
