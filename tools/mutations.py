@@ -631,7 +631,7 @@ B_SENSORS = "tests/test_behaviours_sensors.py::"
 B_CLOSED_LOOP = "tests/test_behaviours_closed_loop.py::"
 B_REPLAY = "tests/test_behaviours_replay.py::"
 
-MUTATIONS += (  # behaviours of issue 36 §6 that once passed every test covering their code
+MUTATIONS += (  # behaviours that once passed every test covering their code (tests/test_behaviours_*.py)
     Mutation(
         "FFBSi weighs a backward step with the input of the step it leaves",
         "src/quadest/estimators/particle_smoothing.py",
