@@ -829,6 +829,20 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         'Q, R_acc, R_mag, P0 = replay_noise(settings, T, T,',
         (B_REPLAY + "test_the_replays_magnetometer_r_uses_the_magnetometers_own_sample_period",),
     ),
+    Mutation(
+        "the paired comparison's bootstrap CI at 90 %",
+        "src/quadest/evaluation/paired.py",
+        "tail = (1.0 - CONFIDENCE) / 2.0",
+        "tail = 1.0 - CONFIDENCE",
+        (B_STATISTICS + "test_the_paired_bootstrap_95_percent_interval_covers_as_a_percentile_bootstrap",),
+    ),
+    Mutation(
+        "the closed loop's work called shippable without checking its loop",
+        "src/quadest/app/closed_loop_job.py",
+        "        return picklable(self.loop)",
+        "        return True",
+        (B_PIPELINE + "test_work_whose_model_cannot_be_pickled_runs_in_the_jobs_own_process",),
+    ),
 )  # fmt: skip
 
 
