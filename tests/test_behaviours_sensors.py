@@ -4,8 +4,10 @@
   variance on the position, as the filters do not estimate the drift) equals the variance of the
   errors :func:`~quadest.sensors.gps.measure_gps` draws, for a receiver with non-zero drift and
   standard deviations away from 1 (where adding standard deviations, or forgetting the drift,
-  changes ``R`` by 30 % or more). Monte Carlo over B runs at one fix: the sample variance over
-  runs is σ² χ²(B−1)/(B−1), so the bound is 4.5 √(2/(B−1)) relative.
+  changes ``R`` by 30 % or more); and the barometer's ``R`` (white noise, turn-on bias and the
+  random walk at mid-run) equals the variance of its drawn errors at mid-run. Monte Carlo over B
+  runs at one sample: the sample variance over runs is σ² χ²(B−1)/(B−1), so the bound is
+  4.5 √(2/(B−1)) relative.
 - The camera's field of view reads ``image_size`` as [width, height]: on a non-square image, a
   line of sight just inside the half-width along x is seen and one just outside the half-height
   along y is not; a beacon on the optical axis is seen at (width/2, height/2).
@@ -14,8 +16,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from helpers import compose_settings
+from quadest.sensors.barometer import measure_barometer
 from quadest.sensors.gps import measure_gps
 from quadest.sensors.vision import VisionSpec, in_view, measure_vision
 from quadest.simulation.registry import build_data
@@ -58,3 +62,27 @@ def test_the_cameras_field_of_view_is_width_by_height():
     q, p = np.tile([1.0, 0.0, 0.0, 0.0], (1, 2, 1)), np.zeros((1, 2, 3))
     record = measure_vision(centred, q, p, 0.01, [np.random.default_rng(0)])
     np.testing.assert_allclose(record.values[0, 0], [320.0, 100.0], atol=1e-9)
+
+
+def test_the_barometer_r_adds_the_variances_of_its_noise_bias_and_drift_at_mid_run():
+    """A barometer with a turn-on bias, white noise and a random walk (none of them 1): ``R`` is
+    the variance of the drawn errors at mid-run (the convention of ``BarometerSpec.variance``),
+    against the sample variance over B runs within the χ² bound."""
+    overrides = [
+        "sensor.barometer.bias=0.3",
+        "sensor.barometer.white_noise=0.2",
+        "sensor.barometer.bias_random_walk=0.1",
+    ]
+    settings = compose_settings(["model=ins", "model.aiding=[barometer]", "runs=2", "duration=2.0", "progress=false",
+                                 *overrides])  # fmt: skip
+    data = build_data(settings)
+    R = float(data.model.aiding["barometer"].R[0, 0]) / settings.model.measurement_noise_inflation
+    T, duration = float(settings.sample_period), float(data.time[-1] - data.time[0])
+    B, K1 = 8000, data.time.size
+    record = measure_barometer(
+        settings.sensor.barometer, np.zeros((B, K1)), T, [np.random.default_rng([18, i]) for i in range(B)]
+    )
+    mid = int(np.flatnonzero(record.available & (np.arange(K1) * T >= duration / 2.0 - 1e-9))[0])
+    assert mid * T == pytest.approx(duration / 2.0)
+    variance = record.values[:, mid, 0].var(ddof=1)
+    assert abs(variance / R - 1.0) <= Z * np.sqrt(2.0 / (B - 1)), (variance, R)

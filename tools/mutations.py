@@ -843,6 +843,13 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "        return True",
         (B_PIPELINE + "test_work_whose_model_cannot_be_pickled_runs_in_the_jobs_own_process",),
     ),
+    Mutation(
+        "the barometer's R adds the white noise's and the bias's standard deviations",
+        "src/quadest/sensors/barometer.py",
+        "return self.white_noise**2 + self.bias**2 + self.bias_random_walk**2",
+        "return (self.white_noise + self.bias) ** 2 + self.bias_random_walk**2",
+        (B_SENSORS + "test_the_barometer_r_adds_the_variances_of_its_noise_bias_and_drift_at_mid_run",),
+    ),
 )  # fmt: skip
 
 
