@@ -768,6 +768,236 @@ MUTATIONS = (
     ),
 )  # fmt: skip
 
+B_SMOOTHING = "tests/test_behaviours_smoothing.py::"
+B_PIPELINE = "tests/test_behaviours_pipeline.py::"
+B_KERNELS = "tests/test_behaviours_kernels.py::"
+B_STATISTICS = "tests/test_behaviours_statistics.py::"
+B_CONFIG = "tests/test_behaviours_config.py::"
+B_SENSORS = "tests/test_behaviours_sensors.py::"
+B_CLOSED_LOOP = "tests/test_behaviours_closed_loop.py::"
+B_REPLAY = "tests/test_behaviours_replay.py::"
+
+MUTATIONS += (  # behaviours that once passed every test covering their code (tests/test_behaviours_*.py)
+    Mutation(
+        "FFBSi weighs a backward step with the input of the step it leaves",
+        "src/quadest/estimators/particle_smoothing.py",
+        "cloud, u_next = clouds[k], clouds[k + 1].input",
+        "cloud, u_next = clouds[k], clouds[k].input",
+        (B_SMOOTHING + "test_ffbsi_draws_each_backward_step_through_the_transition_into_the_next_step",),
+    ),
+    Mutation(
+        "a particle filter's smoother cloud keeps the measurement's input",
+        "src/quadest/estimators/particle.py",
+        "ParticleCloud(x_new.copy(), w.copy(), self._u_prev.copy())",
+        "ParticleCloud(x_new.copy(), w.copy(), u.copy())",
+        (B_SMOOTHING + "test_every_particle_filter_keeps_the_input_of_the_transition_into_its_cloud",),
+    ),
+    Mutation(
+        "a smoothed row never marked from the cache",
+        "src/quadest/app/pipeline.py",
+        "row_cache[result.smoothed.name] = row_cache.get(result.name, False)",
+        "row_cache[result.smoothed.name] = row_cache.get(result.smoothed.name, False)",
+        (B_PIPELINE + "test_a_smoothed_row_is_marked_from_cache_exactly_as_its_filters_row",),
+    ),
+    Mutation(
+        "work sent to worker processes whether or not it pickles",
+        "src/quadest/app/estimator_runs.py",
+        "return processes if processes == 1 or work.shippable() else 1",
+        "return processes",
+        (B_PIPELINE + "test_work_whose_model_cannot_be_pickled_runs_in_the_jobs_own_process",),
+    ),
+    Mutation(
+        "the open loop's work called shippable without checking its model",
+        "src/quadest/app/estimator_runs.py",
+        "        return picklable(self.data.model)",
+        "        return True",
+        (B_PIPELINE + "test_work_whose_model_cannot_be_pickled_runs_in_the_jobs_own_process",),
+    ),
+    Mutation(
+        "the compiled quadrotor f with (Iy − Ix) in the yaw equation",
+        "src/quadest/models/quadrotor_kernels.py",
+        "wd2 = ((ix - iy) * wp * wq",
+        "wd2 = ((iy - ix) * wp * wq",
+        (B_KERNELS + "test_quadrotor_kernels_equal_numpy_with_randomised_parameters",),
+    ),
+    Mutation(
+        "the compiled quadrotor h with the x-axis drag on the y axis",
+        "src/quadest/models/quadrotor_kernels.py",
+        "kt0 * x[b, k, 0], kt1 * x[b, k, 1]",
+        "kt0 * x[b, k, 0], kt0 * x[b, k, 1]",
+        (B_KERNELS + "test_quadrotor_kernels_equal_numpy_with_randomised_parameters",),
+    ),
+    Mutation(
+        "the compiled log-density sums 8 terms left to right",
+        "src/quadest/numerics/particle_kernels.py",
+        "        if r < 8:  # numpy sums fewer",
+        "        if r <= 8:  # numpy sums fewer",
+        (B_KERNELS + "test_compiled_diagonal_log_density_is_numpys_bit_for_bit_in_every_dimension",),
+    ),
+    Mutation(
+        'the paired summary line counts raw p-values',
+        "src/quadest/evaluation/paired.py",
+        'significant = int((tested["p_wilcoxon_holm"] < SIGNIFICANCE).sum())',
+        'significant = int((tested["p_wilcoxon"] < SIGNIFICANCE).sum())',
+        (B_STATISTICS + "test_the_count_of_differing_states_uses_holm_adjusted_p_values",),
+    ),
+    Mutation(
+        "the sweep's paired summary counts raw p-values",
+        "src/quadest/aggregate/statistics.py",
+        "{int((tested['p_wilcoxon_holm'] < SIGNIFICANCE).sum())} of",
+        "{int((tested['p_wilcoxon'] < SIGNIFICANCE).sum())} of",
+        (B_STATISTICS + "test_the_count_of_differing_states_uses_holm_adjusted_p_values",),
+    ),
+    Mutation(
+        "the relative difference's bootstrap divides by another resample's reference",
+        "src/quadest/evaluation/paired.py",
+        'boot_d, boot_ref = weights @ d, weights @ b',
+        'boot_d, boot_ref = weights @ d, weights[::-1] @ b',
+        (B_STATISTICS + "test_the_paired_comparisons_relative_ci_is_a_paired_bootstrap_of_the_ratio",),
+    ),
+    Mutation(
+        "the particle-count relative difference divides by another resample's reference",
+        "src/quadest/aggregate/particle_count.py",
+        'boot_d, boot_b = weights @ (after - before), weights @ before',
+        'boot_d, boot_b = weights @ (after - before), weights[::-1] @ before',
+        (B_STATISTICS + "test_the_particle_count_intervals_are_paired_bootstraps_of_the_ratio",),
+    ),
+    Mutation(
+        "the particle-count ratio divides by another resample's denominator",
+        "src/quadest/aggregate/particle_count.py",
+        'boot = (weights @ numerator) / (weights @ denominator)',
+        'boot = (weights @ numerator) / (weights[::-1] @ denominator)',
+        (B_STATISTICS + "test_the_particle_count_intervals_are_paired_bootstraps_of_the_ratio",),
+    ),
+    Mutation(
+        'a ranking step signed by the reference instead of the estimator',
+        "src/quadest/aggregate/ranking.py",
+        'sign = 1.0 if est == better else -1.0',
+        'sign = 1.0 if ref == better else -1.0',
+        (B_STATISTICS + "test_a_ranking_steps_sign_and_verdict_do_not_depend_on_the_estimator_order",),
+    ),
+    Mutation(
+        'a ranking verdict read from the unsigned difference',
+        "src/quadest/aggregate/ranking.py",
+        '("yes" if rel < 0 else',
+        '("yes" if r["rel_diff"] < 0 else',
+        (B_STATISTICS + "test_a_ranking_steps_sign_and_verdict_do_not_depend_on_the_estimator_order",),
+    ),
+    Mutation(
+        "the aggregate tables' 95 % interval with the 0.95 t quantile",
+        "src/quadest/aggregate/statistics.py",
+        'student_t.ppf(0.975, (n - 1)',
+        'student_t.ppf(0.95, (n - 1)',
+        (B_STATISTICS + "test_the_aggregate_tables_95_percent_interval_covers_95_percent",
+         B_STATISTICS + "test_the_particle_count_series_95_percent_interval_covers_95_percent",),
+    ),
+    Mutation(
+        "the control tables' 95 % interval with the ddof=0 standard deviation",
+        "src/quadest/closed_loop/control_metrics.py",
+        'half = float(student_t.ppf(0.975, v.size - 1) * v.std(ddof=1)',
+        'half = float(student_t.ppf(0.975, v.size - 1) * v.std()',
+        (B_STATISTICS + "test_the_closed_loop_control_tables_95_percent_intervals_cover_95_percent",),
+    ),
+    Mutation(
+        'the sweep-versus-best paired interval at 90 %',
+        "src/quadest/aggregate/versus_best.py",
+        'half = student_t.ppf(0.5 + CONFIDENCE / 2, n - 1)',
+        'half = student_t.ppf(CONFIDENCE, n - 1)',
+        (B_STATISTICS + "test_the_paired_and_step_time_95_percent_intervals_cover_95_percent",),
+    ),
+    Mutation(
+        "the step-time ratio's interval with a normal quantile",
+        "src/quadest/aggregate/ranking.py",
+        'half = stats.t.ppf(0.5 + CONFIDENCE / 2, n - 1)',
+        'half = stats.norm.ppf(0.5 + CONFIDENCE / 2)',
+        (B_STATISTICS + "test_the_paired_and_step_time_95_percent_intervals_cover_95_percent",),
+    ),
+    Mutation(
+        "a scenario's transition_time left unchecked",
+        "src/quadest/app/validate.py",
+        '"spin_up_time", "transition_time", "approach_time")',
+        '"spin_up_time", "approach_time")',
+        (B_CONFIG + "test_a_transition_time_that_is_not_positive_is_refused_before_any_work",),
+    ),
+    Mutation(
+        "the GPS R adds the drift's standard deviation",
+        "src/quadest/sensors/gps.py",
+        'R[0:3, 0:3] += spec.position_drift**2 * np.eye(3)',
+        'R[0:3, 0:3] += spec.position_drift * np.eye(3)',
+        (B_SENSORS + "test_the_gps_r_adds_the_drifts_variance_to_the_white_noises",),
+    ),
+    Mutation(
+        "the camera's field of view reads the image size as height x width",
+        "src/quadest/sensors/vision.py",
+        '    width, height = spec.image_size\n    x, y, z',
+        '    height, width = spec.image_size\n    x, y, z',
+        (B_SENSORS + "test_the_cameras_field_of_view_is_width_by_height",),
+    ),
+    Mutation(
+        "the camera's principal point reads the image size as height x width",
+        "src/quadest/sensors/vision.py",
+        '    centre = 0.5 * np.asarray(spec.image_size, dtype=float)\n    values',
+        '    centre = 0.5 * np.asarray(spec.image_size[::-1], dtype=float)\n    values',
+        (B_SENSORS + "test_the_cameras_field_of_view_is_width_by_height",),
+    ),
+    Mutation(
+        'the estimate-fed quadrotor loop predicts with the inputs of step k',
+        "src/quadest/closed_loop/feedback.py",
+        'self.tracker.step(k, self.u_prev, u_now, plant.mimu()',
+        'self.tracker.step(k, u_now, u_now, plant.mimu()',
+        (B_CLOSED_LOOP + "test_the_closed_loop_filter_predicts_with_the_inputs_of_the_previous_step",),
+    ),
+    Mutation(
+        "seed 003's EKF in predicts with the inputs of step k",
+        "src/quadest/closed_loop/seed003.py",
+        'self.tracker.step(k, self.u_prev, u_now, self.measurement(plant)',
+        'self.tracker.step(k, u_now, u_now, self.measurement(plant)',
+        (B_CLOSED_LOOP + "test_the_closed_loop_filter_predicts_with_the_inputs_of_the_previous_step",),
+    ),
+    Mutation(
+        "seed 003's state sensor with the rate sigma on theta",
+        "src/quadest/models/seed003_attitude.py",
+        'np.array([s.angle, s.angle, s.rate, s.rate, s.rate])',
+        'np.array([s.angle, s.rate, s.angle, s.rate, s.rate])',
+        (B_CLOSED_LOOP + "test_seed003s_state_sensor_puts_the_angle_sigma_on_angles_and_the_rate_sigma_on_rates",),
+    ),
+    Mutation(
+        'a ULog topic read from the instance listed first',
+        "src/quadest/replay/ulog.py",
+        'if d.name not in topics or d.multi_id < topics[d.name][0]:',
+        'if d.name not in topics:',
+        (B_REPLAY + "test_a_topic_logged_by_several_instances_is_read_from_instance_0",),
+    ),
+    Mutation(
+        "the replay's magnetometer R at the filter's step",
+        "src/quadest/replay/data.py",
+        'Q, R_acc, R_mag, P0 = replay_noise(settings, T, mag_period,',
+        'Q, R_acc, R_mag, P0 = replay_noise(settings, T, T,',
+        (B_REPLAY + "test_the_replays_magnetometer_r_uses_the_magnetometers_own_sample_period",),
+    ),
+    Mutation(
+        "the paired comparison's bootstrap CI at 90 %",
+        "src/quadest/evaluation/paired.py",
+        "tail = (1.0 - CONFIDENCE) / 2.0",
+        "tail = 1.0 - CONFIDENCE",
+        (B_STATISTICS + "test_the_paired_bootstrap_95_percent_interval_covers_as_a_percentile_bootstrap",),
+    ),
+    Mutation(
+        "the closed loop's work called shippable without checking its loop",
+        "src/quadest/app/closed_loop_job.py",
+        "        return picklable(self.loop)",
+        "        return True",
+        (B_PIPELINE + "test_work_whose_model_cannot_be_pickled_runs_in_the_jobs_own_process",),
+    ),
+    Mutation(
+        "the barometer's R adds the white noise's and the bias's standard deviations",
+        "src/quadest/sensors/barometer.py",
+        "return self.white_noise**2 + self.bias**2 + self.bias_random_walk**2",
+        "return (self.white_noise + self.bias) ** 2 + self.bias_random_walk**2",
+        (B_SENSORS + "test_the_barometer_r_adds_the_variances_of_its_noise_bias_and_drift_at_mid_run",),
+    ),
+)  # fmt: skip
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""
