@@ -62,8 +62,8 @@ position_3d}, sequential: true}`: the estimate in %, its interval — the α-spe
 group-sequential design (Lan & DeMets 1983), valid although the job stopped when it decided, at level
 1 − `decision.alpha` — and the runs it took, with the job's budget (`decision.max_runs`), margin and
 its own verdict (*better*, *worse*, *equivalent*, *undecided*). The claims of a source that read one
-`decisions.csv` are a family: the job must run at `decision.alpha` ≤ 0.05 / (their number)
-(Bonferroni), or the ledger is refused. A comparison that ends *equivalent* leaves a one-sided claim
+`decisions.csv` are a family: the job must run at `decision.alpha` ≤ 0.05 / m for the m comparisons
+they read (Bonferroni), or the ledger is refused. A comparison that ends *equivalent* leaves a one-sided claim
 inconclusive with no more runs needed (any difference is inside the margin); one *undecided* at the
 budget gives the runs its effect would need beyond it.
 
