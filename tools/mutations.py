@@ -666,6 +666,20 @@ MUTATIONS = (
         ("tests/test_reproductions.py::test_runs_needed_follow_the_half_width_scaling",),
     ),
     Mutation(
+        "the ledger lets the claims reading one runs=auto job each spend the whole alpha (no Bonferroni)",
+        "src/quadest/aggregate/reproductions.py",
+        "        if alpha * size > v.SIGNIFICANCE * (1 + 1e-9):",
+        "        if alpha > v.SIGNIFICANCE * (1 + 1e-9):",
+        ("tests/test_reproductions_sequential.py::test_claims_reading_one_job_are_held_to_a_bonferroni_level",),
+    ),
+    Mutation(
+        "the ledger asks more runs of a comparison runs=auto already decided equivalent",
+        "src/quadest/aggregate/verdicts.py",
+        "        return Decision(INCONCLUSIVE, None, decision.effect_bound, reason)",
+        "        return Decision(INCONCLUSIVE, decision.runs_needed, decision.effect_bound, reason)",
+        ("tests/test_reproductions_sequential.py::test_an_equivalent_comparison_needs_no_more_runs",),
+    ),
+    Mutation(
         "a docs number over several rows takes the first row instead of its min, max or mean",
         "src/quadest/aggregate/doc_numbers.py",
         "    value = values[0] if reduce is None else REDUCERS[reduce](values)",

@@ -20,6 +20,19 @@ class Reading:
     test: str | None = None
     runs: int | None = None
     family: tuple = ()
+    sequential: Sequential | None = None
+    comparison: tuple = ()
+
+
+@dataclass(frozen=True)
+class Sequential:
+    """A reading from a ``runs=auto`` job's ``decisions.csv``: the comparison's own verdict, its
+    equivalence margin (%), and the job's budget and level (its α-spending interval is the reading's CI)."""
+
+    verdict: str
+    margin: float
+    max_runs: int
+    alpha: float
 
 
 @dataclass(frozen=True)

@@ -41,13 +41,16 @@ import pandas as pd
 import yaml
 
 from quadest.aggregate import verdicts as v
-from quadest.aggregate.reproduction_entries import Entry, Outcome, Reading
+from quadest.aggregate.reproduction_entries import Entry, Outcome, Reading, Sequential
 from quadest.aggregate.reproductions_render import render_csv, render_markdown
 
 CLAIM_KEYS = {"claim", "where", "source_value", "command", "measure", "expect", "cause", "testable", "why",
               "choice", "readings", "needs"}  # fmt: skip
 READING_KEYS = {"reading", "command", "measure", "expect", "why"}
-MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit", "p", "test", "runs"}
+MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit", "p", "test", "runs", "sequential"}
+SEQUENTIAL_COLUMNS = {"value": "estimate", "ci": ["ci_low", "ci_high"], "runs": "runs", "unit": "%"}
+"""What ``sequential: true`` reads from a ``runs=auto`` job's ``decisions.csv`` (the estimate and its
+α-spending interval are already in % of the reference)."""
 PAIR_COLUMNS = {"pair", "estimator", "reference", "state", "arm", "metric", "step"}
 """Select columns that name a comparison inside a job; the others (a sweep cell) name the job."""
 
@@ -61,6 +64,8 @@ def read_measure(measure: dict, root: Path, label: str) -> Reading:
     unknown = set(measure) - MEASURE_KEYS
     if unknown:
         raise ClaimError(f"{label}: unknown measure key(s) {sorted(unknown)}; allowed: {sorted(MEASURE_KEYS)}")
+    if measure.get("sequential"):
+        measure = _sequential_measure(measure, label)
     for key in ("file", "value"):
         if key not in measure:
             raise ClaimError(f"{label}: measure.{key} is required")
@@ -91,7 +96,36 @@ def read_measure(measure: dict, root: Path, label: str) -> Reading:
     runs = int(row[measure["runs"]]) if "runs" in measure else None
     family = (measure["file"], *sorted((k, str(w)) for k, w in select.items() if k not in PAIR_COLUMNS))
     p_raw = float(row[measure["p"]]) if "p" in measure else None
-    return Reading(value, low, high, str(measure.get("unit", "")), p_raw, measure.get("test"), runs, family)
+    sequential = _sequential(row, path, label) if measure.get("sequential") else None
+    comparison = tuple(sorted((k, str(w)) for k, w in select.items()))
+    return Reading(value, low, high, str(measure.get("unit", "")), p_raw, measure.get("test"), runs, family, sequential,
+                   comparison)  # fmt: skip
+
+
+def _sequential_measure(measure: dict, label: str) -> dict:
+    """``sequential: true``: the columns of ``decisions.csv``; a test p has no place (the interval is
+    the α-spending one, its level fixed by the job)."""
+    fixed = set(measure) & {"value", "ci", "runs", "unit", "scale", "p", "test"}
+    if fixed:
+        raise ClaimError(f"{label}: measure.sequential reads decisions.csv's own columns; drop {sorted(fixed)}")
+    return {**measure, **SEQUENTIAL_COLUMNS}
+
+
+def _sequential(row: pd.Series, path: Path, label: str) -> Sequential:
+    """The comparison's verdict and margin from its ``decisions.csv`` row, the budget and level from
+    the job's config beside it (``config.yaml``, or ``.hydra/config.yaml`` in a sweep cell)."""
+    for column in ("verdict", "margin"):
+        if column not in row.index:
+            raise ClaimError(f"{label}: measure.sequential needs a decisions.csv (no column {column!r} in {path})")
+    configs = [path.parent / "config.yaml", path.parent / ".hydra" / "config.yaml"]
+    config = next((c for c in configs if c.is_file()), None)
+    if config is None:
+        raise ClaimError(f"{label}: measure.sequential needs the job's config.yaml beside {path.name}")
+    job = yaml.safe_load(config.read_text(encoding="utf-8")) or {}
+    rules = job.get("decision") or {}
+    if job.get("runs") != "auto" or "alpha" not in rules or "max_runs" not in rules:
+        raise ClaimError(f"{label}: {config} is not a runs=auto job's config (runs: auto, decision.alpha, max_runs)")
+    return Sequential(str(row["verdict"]), float(row["margin"]), int(rules["max_runs"]), float(rules["alpha"]))
 
 
 def _rule(expect: object, label: str) -> v.Rule:
@@ -191,6 +225,26 @@ def _corrected(pending: list[_Pending]) -> dict[int, tuple[float, int]]:
     return out
 
 
+def _check_sequential_levels(pending: list[_Pending]) -> None:
+    """The comparisons that one source's claims read from one ``decisions.csv`` are one family, as a
+    job's tests are: their α-spending intervals, each at the job's ``decision.alpha``, hold together at
+    level 0.05 only when ``alpha`` × (comparisons) ≤ 0.05 (Bonferroni; two claims reading one
+    comparison count once); a job run at a larger ``alpha`` is refused."""
+    families: dict[tuple, dict[tuple, tuple[str, Reading]]] = {}
+    for item in pending:
+        for _, _, reading in item.readings:
+            if reading is not None and reading.sequential is not None:
+                families.setdefault(reading.family, {}).setdefault(reading.comparison, (item.label, reading))
+    for members in families.values():
+        label, first = next(iter(members.values()))
+        alpha, size = first.sequential.alpha, len(members)
+        if alpha * size > v.SIGNIFICANCE * (1 + 1e-9):
+            raise ClaimError(
+                f"{label}: {size} comparisons are read from {first.family[0]} at decision.alpha={alpha:g}; "
+                f"together they need decision.alpha <= {v.SIGNIFICANCE}/{size} (Bonferroni)"
+            )
+
+
 def _decide(item: _Pending, corrected: dict[int, tuple[float, int]], source: str) -> Entry:
     claim = item.claim
     base = dict(source=source, claim=claim["claim"], where=claim["where"], source_value=str(claim["source_value"]),
@@ -207,6 +261,9 @@ def _decide(item: _Pending, corrected: dict[int, tuple[float, int]], source: str
             p, size = corrected.get(id(reading), (None, 1))
             decision = v.decide(reading.value, reading.low, reading.high, rule, p=p, p_raw=reading.p_raw,
                                 family=size, runs=reading.runs)  # fmt: skip
+            if reading.sequential is not None:
+                decision = v.with_sequential(decision, reading.sequential.verdict, reading.sequential.margin,
+                                             reading.sequential.max_runs)  # fmt: skip
             outcome = Outcome(spec["reading"], spec["command"], rule, reading, decision, p, size)
         outcomes.append(outcome)
     run = {o.decision.verdict for o in outcomes if o.reading is not None}
@@ -226,6 +283,7 @@ def build_entries(claims: list[dict], root: Path, source: str, label: str = "cla
     """The ledger rows of one source's claims (Holm runs over their tests, job by job)."""
     pending = [_read_claim(claim, root, f"{label} {i + 1}") for i, claim in enumerate(claims)]
     corrected = _corrected(pending)
+    _check_sequential_levels(pending)
     return [_decide(item, corrected, source) for item in pending]
 
 

@@ -56,6 +56,17 @@ every key). Read from one result:
   cause: "..."              # required for every verdict but reproduced
 ```
 
+A comparison run until it decides (`runs=auto`, docs/experiments.md) is read from its job's
+`decisions.csv` with `measure: {file: results/NAME/decisions.csv, select: {pair: "hhcf - hf", state:
+position_3d}, sequential: true}`: the estimate in %, its interval — the α-spending one of the
+group-sequential design (Lan & DeMets 1983), valid although the job stopped when it decided, at level
+1 − `decision.alpha` — and the runs it took, with the job's budget (`decision.max_runs`), margin and
+its own verdict (*better*, *worse*, *equivalent*, *undecided*). The claims of a source that read one
+`decisions.csv` are a family: the job must run at `decision.alpha` ≤ 0.05 / m for the m comparisons
+they read (Bonferroni), or the ledger is refused. A comparison that ends *equivalent* leaves a one-sided claim
+inconclusive with no more runs needed (any difference is inside the margin); one *undecided* at the
+budget gives the runs its effect would need beyond it.
+
 Under a reconstruction choice the source does not fix, `choice` names it and `readings` lists one
 `{reading, command, measure}` per reading (or `{reading, why}` for one not run); a claim no checked-in
 run decides gives `needs` (what would decide it); one nothing here can hold, `testable: false` and
@@ -77,6 +88,10 @@ def _reading_text(outcome: Outcome) -> str:
     text = f"{number(r.value)}{unit}" + ("" if r.low == r.high == r.value else f" [{number(r.low)}, {number(r.high)}]")
     if r.runs is not None:
         text += f", {r.runs} runs"
+    if r.sequential is not None:
+        s = r.sequential
+        text += (f", α-spending interval (runs=auto at α = {s.alpha:g}, at most {s.max_runs} runs, "
+                 f"margin ±{s.margin:g} %: {s.verdict})")  # fmt: skip
     if outcome.p is not None:
         text += f", Holm p = {number(outcome.p)} over {outcome.family_size} claims (raw {number(r.p_raw)})"
     text += f"; rule: {outcome.rule.text()}" + (" and Holm p < 0.05" if outcome.p is not None else "")

@@ -40,6 +40,7 @@ import numpy as np
 from scipy.stats import norm
 
 from quadest.evaluation.paired import SIGNIFICANCE, holm
+from quadest.evaluation.sequential import EQUIVALENT
 
 REPRODUCED = "reproduced"
 CONTRADICTED = "contradicted"
@@ -128,6 +129,20 @@ def decide(value: float, low: float, high: float, rule: Rule, *, p: float | None
             needed = math.ceil(runs * (z_needed / z_seen) ** 2) if z_seen > 0 else None
         return Decision(INCONCLUSIVE, needed, None, f"the CI is on the claim's side, but Holm p = {p:.3g} ≥ 0.05")
     return Decision(INCONCLUSIVE, runs_to_decide(value, low, high, rule, runs), effect_bound(low, high, rule))
+
+
+def with_sequential(decision: Decision, verdict: str, margin: float, max_runs: int) -> Decision:
+    """An inconclusive reading of a ``runs=auto`` comparison (:mod:`quadest.evaluation.sequential`)
+    says why it stopped: *equivalent* (its interval lies inside ±``margin`` %: no more runs are
+    needed, any difference is below the margin), or *undecided* at the budget (the runs the observed
+    effect would need, beyond ``max_runs``)."""
+    if decision.verdict != INCONCLUSIVE:
+        return decision
+    if verdict == EQUIVALENT:
+        reason = f"runs=auto decided equivalent: the interval lies inside ±{margin:g} %, any difference is smaller"
+        return Decision(INCONCLUSIVE, None, decision.effect_bound, reason)
+    reason = f"undecided at the budget of {max_runs} runs"
+    return Decision(INCONCLUSIVE, decision.runs_needed, decision.effect_bound, reason)
 
 
 def runs_to_decide(value: float, low: float, high: float, rule: Rule, runs: int | None) -> int | None:
