@@ -364,9 +364,9 @@ MUTATIONS = (
     ),
     Mutation(
         "NIS band share with the state's degrees of freedom",
-        "src/quadest/evaluation/metrics.py",
-        '"nis_in_band": fraction_inside(res.nis_mean_t, m, res.alive_t)',
-        '"nis_in_band": fraction_inside(res.nis_mean_t, n, res.alive_t)',
+        "src/quadest/metrics/builtin.py",
+        '"nis_in_band": fraction_inside(result.nis_mean_t, m, result.alive_t)',
+        '"nis_in_band": fraction_inside(result.nis_mean_t, model.n_err, result.alive_t)',
         (BANDS + "test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis[linear]",
          BANDS + "test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis[attitude]"),
     ),

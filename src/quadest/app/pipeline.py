@@ -27,7 +27,13 @@ from quadest.app.settings import JobSettings, data_key
 from quadest.cache.lookup import JobCache
 from quadest.estimators.registry import estimator_parameters
 from quadest.evaluation.formatting import strict_json
-from quadest.evaluation.job_tables import MetricTables, estimator_entries, with_cache_column, write_tables
+from quadest.evaluation.job_tables import (
+    MetricTables,
+    estimator_entries,
+    overview_keys,
+    with_cache_column,
+    write_tables,
+)
 from quadest.evaluation.paired import summary_lines
 from quadest.montecarlo.results import EstimatorResult
 
@@ -142,6 +148,7 @@ def run_pipeline(
         **provenance(),
         "overrides": list(overrides or []),
         **report.fields,
+        "metric_keys": overview_keys(report.tables.overview),
         "cache": {"enabled": bool(exp.cache.enabled), "data_from_cache": data_from_cache},
         "estimators": estimator_entries(rows.results, report.tables, rows.params, rows.from_cache),
     }
@@ -150,8 +157,9 @@ def run_pipeline(
     summary["_paired"] = summary_lines(report.tables.paired)
     if report.caption is not None:
         summary["_caption"] = report.caption
-    if report.after_table is not None:
-        summary["_after_table"] = report.after_table
+    after = "\n".join(text for text in (report.tables.further, report.after_table) if text)
+    if after:
+        summary["_after_table"] = after
     return summary
 
 
