@@ -64,8 +64,37 @@ PARTICLE_KERNELS = "tests/test_particle_kernels.py::"
 STEPS = "tests/test_gaussian_steps.py::"
 SMOOTHERS = "tests/test_smoothers.py::"
 SMOOTHING_RUNS = "tests/test_smoothing_runs.py::"
+METRIC_PARTS = "tests/test_metric_parts.py::"
 
 MUTATIONS = (
+    Mutation(
+        "NCI signed (the inclination index) instead of the mean absolute log ratio",
+        "src/quadest/metrics/credibility.py",
+        "terms.mean(), np.abs(terms).mean()",
+        "terms.mean(), terms.mean()",
+        (METRIC_PARTS + "test_nci_and_inclination_match_the_definition_and_the_known_cases",),
+    ),
+    Mutation(
+        "group NEES from the inverse covariance's block instead of the marginal block's inverse",
+        "src/quadest/metrics/groups.py",
+        "    block = rows @ np.swapaxes(rows, -1, -2)\n",
+        "    block = np.linalg.inv(np.linalg.inv(factor @ np.swapaxes(factor, -1, -2))[:, index][:, :, index])\n",
+        (METRIC_PARTS + "test_group_nees_uses_the_inverse_of_the_marginal_block",),
+    ),
+    Mutation(
+        "steady-state window taken from the start",
+        "src/quadest/metrics/windows.py",
+        "steady = slice(K - max(1, round(settings.steady * K)), K)",
+        "steady = slice(0, max(1, round(settings.steady * K)))",
+        (METRIC_PARTS + "test_windowed_rmse_and_time_to_converge",),
+    ),
+    Mutation(
+        "a band share from a single surviving step",
+        "src/quadest/metrics/consistency.py",
+        "if steps.sum() < MIN_SHARE_OF_STEPS * (average_t.size - 1) or not steps.any():",
+        "if not steps.any():",
+        (METRIC_PARTS + "test_a_band_share_over_almost_no_steps_is_not_reported",),
+    ),
     Mutation(
         "diverged runs kept in the RMSE",
         "src/quadest/montecarlo/results.py",
