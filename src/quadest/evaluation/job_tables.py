@@ -104,8 +104,8 @@ def further_measures(summary: pd.DataFrame, overview: pd.DataFrame) -> str:
     wide = text.pivot_table(index="row", columns="estimator", values="cell", aggfunc="first", sort=False)
     wide.columns.name = None
     lines = [
-        "Median and 95th percentile of |error| over the steps (mean over runs of the per-run values; median: "
-        "median over runs) and the time to converge (docs/metrics.md):",
+        "Median / 95th percentile of |error| over the steps (the median over runs of the per-run medians, the mean "
+        "of the per-run 95th percentiles) / time to converge (docs/metrics.md; -: not settled by the end):",
         wide.reset_index().rename(columns={"row": "state"}).to_string(index=False),
     ]
     groups = [c for c in overview.columns if c.startswith("nees_in_band_")]
@@ -116,7 +116,7 @@ def further_measures(summary: pd.DataFrame, overview: pd.DataFrame) -> str:
             shares = ", ".join(f"{g.removeprefix('nees_in_band_')} {_share(r[g])}" for g in groups)
             nci, inclination = _number(r["nci"]), _number(r["inclination"], "+")
             lines.append(f"  {r['estimator']:>8s}: NCI {nci}, inclination {inclination}; in band: {shares}")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n\n"
 
 
 def _number(value: float, sign: str = "") -> str:
