@@ -15,6 +15,8 @@ import pytest
 from helpers import compose_config
 from quadest.aggregate.sweep import load_sweep
 from quadest.app.job import run_job
+from quadest.app.validate import validate
+from quadest.errors import ConfigError
 from quadest.metrics.base import BatchStart, StepView
 from quadest.metrics.consistency import fraction_inside
 from quadest.metrics.credibility import Credibility
@@ -168,6 +170,17 @@ def test_a_band_share_over_almost_no_steps_is_not_reported():
     assert fraction_inside(average, 6, alive) == 1.0
     alive[2:] = 0  # every run diverged after step 1: one step
     assert np.isnan(fraction_inside(average, 6, alive))
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [("metrics.transient=0", "metrics.transient"), ("metrics.steady=1.5", "metrics.steady"),
+     ("metrics.settle_factor=1", "metrics.settle_factor")],
+)  # fmt: skip
+def test_bad_metric_windows_fail_validation_naming_the_key(override, key):
+    with pytest.raises(ConfigError) as caught:
+        validate(compose_config([override]))
+    assert str(caught.value).startswith(f"{key}=") and "\n" not in str(caught.value)
 
 
 def _documented(section: str) -> set[str]:
