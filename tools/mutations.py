@@ -68,6 +68,13 @@ METRIC_PARTS = "tests/test_metric_parts.py::"
 
 MUTATIONS = (
     Mutation(
+        "the runner never streams a step into the metric parts",
+        "src/quadest/runner.py",
+        "            accumulator.step(view)\n",
+        "            pass\n",
+        (METRIC_PARTS + "test_the_worked_example_of_docs_metrics_adds_its_column",),
+    ),
+    Mutation(
         "NCI signed (the inclination index) instead of the mean absolute log ratio",
         "src/quadest/metrics/credibility.py",
         "terms.mean(), np.abs(terms).mean()",
