@@ -126,12 +126,12 @@ def metric_summary(
     out = table[[*keys, "group"]].drop_duplicates(keys).reset_index(drop=True)
     for metric in all_metrics():
         for column in metric.columns(model):
-            if column.per != "state" or column.name == "rmse":
+            if column.per != "state" or column.name == "rmse":  # rmse: summarize's statistics
                 continue
             reduce = AGGREGATES[column.aggregate]
             stats = ok.groupby(keys, sort=False)[column.name].agg(lambda v, f=reduce: _finite(f, v.to_numpy(float)))
             out = out.merge(stats.rename(column.name).reset_index(), on=keys, how="left")
-        extra = [c for c in metric.summary_columns(model) if c not in {c.name for c in metric.columns(model)}]
+        extra = metric.summary_columns(model)
         if not extra:
             continue
         parts = []

@@ -91,8 +91,8 @@ class Metric:
     """A metric part. Subclasses set ``name`` and override :meth:`columns` and, for a streaming
     metric, :meth:`start`; the default :meth:`values` reads ``result.metric_values``, the default
     :meth:`overview` reduces each per-run column over the live runs (NaN when none is left) and
-    passes per-estimator columns through, and the default :meth:`summary` reduces each per-state
-    column over the live runs."""
+    passes per-estimator columns through; :meth:`summary` is for columns of ``rmse_summary.csv`` a
+    metric computes itself."""
 
     name: str = ""
     needs_truth: bool = True
@@ -129,25 +129,14 @@ class Metric:
         return out
 
     def summary(self, result: EstimatorResult, model: FilterModel, settings: MetricsConf) -> dict[str, np.ndarray]:
-        """Columns of ``rmse_summary.csv``, one value per row of the state table (R,): by default each
-        per-state column reduced over the live runs (NaN where no run is left)."""
-        values, live = self.values(result, model), ~result.diverged
-        out = {}
-        for c in self.columns(model):
-            if c.per == "state":
-                kept = np.asarray(values[c.name])[live]
-                reduce = AGGREGATES[c.aggregate]
-                out[c.name] = np.array([_reduce(reduce, kept[:, j]) for j in range(kept.shape[1])])
-        return out
+        """Columns of ``rmse_summary.csv`` that this metric computes itself from what it kept, one value
+        per row of the state table (R,), named by :meth:`summary_columns`. (Per-state columns are
+        reduced over the live runs by the table builder, :func:`quadest.evaluation.metrics.metric_summary`.)"""
+        return {}
 
     def summary_columns(self, model: FilterModel) -> tuple[str, ...]:
         """The names :meth:`summary` gives."""
-        return tuple(c.name for c in self.columns(model) if c.per == "state")
-
-
-def _reduce(reduce, values: np.ndarray) -> float:
-    values = values[np.isfinite(values)]
-    return float(reduce(values)) if values.size else float("nan")
+        return ()
 
 
 def state_rows(model: FilterModel) -> list[tuple[str, str, str]]:

@@ -31,9 +31,6 @@ class RMSE(Metric):
     def values(self, result: EstimatorResult, model: FilterModel) -> dict[str, np.ndarray]:
         return {"rmse": np.concatenate([result.rmse, result.derived_rmse, result.companion_rmse], axis=-1)}
 
-    def summary_columns(self, model: FilterModel) -> tuple[str, ...]:
-        return ()  # rmse_mean, rmse_std, mse_mean, runs: quadest.evaluation.metrics.summarize
-
 
 class Divergence(Metric):
     name = "divergence"
