@@ -23,7 +23,7 @@ from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.registry import build_estimator
 from quadest.estimators.smoothing import rts_backward
 from quadest.estimators.srukf import SRUKF
-from quadest.evaluation.consistency import chi2_band
+from quadest.metrics.consistency import chi2_band
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.base import FilterModel
 from quadest.numerics import quaternion as quat

@@ -2,7 +2,7 @@
 
 ``summary.json`` (and the printed per-estimator line) gives, per estimator, the share of time
 steps whose run-averaged NEES and NIS lie inside their two-sided 95 % band
-(``quadest.evaluation.consistency``; Bar-Shalom, Li & Kirubarajan 2001, §5.4.2): averaged over the N runs
+(``quadest.metrics.consistency``; Bar-Shalom, Li & Kirubarajan 2001, §5.4.2): averaged over the N runs
 alive at step k, ``N·ε̄_k ~ χ²(N·d)``, with d the dimension of the estimation error (NEES) or of
 the primary measurement (NIS). The two dimensions differ on most models (``model=linear``: 4
 states, 2 measured positions; ``model=attitude``: 9 error states, 3 accelerometer axes), and a
@@ -43,7 +43,7 @@ def expected_share(average_t: np.ndarray, alive_t: np.ndarray, dof: int) -> floa
 def synthetic_result(data, nees_t: np.ndarray, nis_t: np.ndarray, alive_t: np.ndarray):
     """An estimator result with the given per-step averages and live-run counts (no estimator runs)."""
     base = failed_result("probe", data, "unused")
-    B, K1, n = data.truth.shape
+    B, K1, n = data.truth.shape[0], data.truth.shape[1], data.model.n_err
     return dataclasses.replace(
         base, diverged=np.zeros(B, dtype=bool), diverged_step=np.full(B, -1), reasons={}, steps=np.full(B, K1 - 1.0),
         sq_error_sum=np.ones((B, n)), nees_sum=np.full(B, float(K1 - 1)), nis_sum=np.full(B, float(K1 - 1)),

@@ -285,8 +285,21 @@ def test_replay_writes_the_outputs_of_every_job_with_differences_to_px4(replay_o
     for name in (*tables, "timeseries.npz", "config.yaml", *figures):
         assert (out / name).is_file(), name
     table = pd.read_csv(out / "rmse_summary.csv")
-    assert set(table["state"]) == {"roll", "pitch", "yaw"} and set(table["unit"]) == {"deg"}
+    assert set(table["state"]) == {"roll", "pitch", "yaw", "attitude"} and set(table["unit"]) == {"deg"}
     assert set(table["quantity"]) == {"difference to PX4"} and table["pcrlb"].isna().all()
+    # the attitude row: the one rotation angle 2 atan2(|v|, |w|) of q_ref* ⊗ q_est, the product written
+    # out here; and the median |roll difference| from the saved angles, over the compared window
+    series = np.load(out / "timeseries.npz")
+    window = series["time"] >= series["time"][0] + summary["compared_from"]
+    (w1, x1, y1, z1), (w2, x2, y2, z2) = series["reference"][window, :4].T, series["mekf/estimate"][0][window, :4].T
+    w = w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2
+    v = np.stack([w1 * x2 - x1 * w2 - y1 * z2 + z1 * y2, w1 * y2 - y1 * w2 - z1 * x2 + x1 * z2,
+                  w1 * z2 - z1 * w2 - x1 * y2 + y1 * x2])  # fmt: skip
+    angle = np.degrees(2 * np.arctan2(np.linalg.norm(v, axis=0), np.abs(w)))
+    rows = table.set_index(["estimator", "state"])
+    assert rows.loc[("mekf", "attitude"), "rmse_mean"] == pytest.approx(np.sqrt(np.mean(angle**2)), rel=1e-6)
+    roll = (series["mekf/angles_deg"][window, 0] - series["reference_angles_deg"][window, 0] + 180) % 360 - 180
+    assert rows.loc[("mekf", "roll"), "abs_error_median"] == pytest.approx(np.median(np.abs(roll)), rel=1e-9)
     metrics = pd.read_csv(out / "metrics.csv")
     assert (metrics["reference"] == "PX4 onboard estimate").all() and metrics["mean_nees"].isna().all()
     assert not metrics["diverged"].any()

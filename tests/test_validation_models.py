@@ -17,8 +17,8 @@ from quadest.estimators.filterpy_ekf import FilterpyEKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.registry import build_estimator
 from quadest.estimators.srukf import SRUKF
-from quadest.evaluation.consistency import chi2_band, fraction_inside
 from quadest.evaluation.pcrlb import pcrlb_caption, pcrlb_is_bound, pcrlb_variances
+from quadest.metrics.consistency import chi2_band, fraction_inside
 from quadest.runner import run_estimator
 from quadest.simulation.registry import build_data
 

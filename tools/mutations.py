@@ -67,8 +67,44 @@ SMOOTHING_RUNS = "tests/test_smoothing_runs.py::"
 SEQUENTIAL = "tests/test_sequential.py::"
 SEQUENTIAL_RUNS = "tests/test_sequential_runs.py::"
 VISIBLE = "tests/test_failures_visible.py::"
+METRIC_PARTS = "tests/test_metric_parts.py::"
 
 MUTATIONS = (
+    Mutation(
+        "the runner never streams a step into the metric parts",
+        "src/quadest/runner.py",
+        "            accumulator.step(view)\n",
+        "            pass\n",
+        (METRIC_PARTS + "test_the_worked_example_of_docs_metrics_adds_its_column",),
+    ),
+    Mutation(
+        "NCI signed (the inclination index) instead of the mean absolute log ratio",
+        "src/quadest/metrics/credibility.py",
+        "terms.mean(), np.abs(terms).mean()",
+        "terms.mean(), terms.mean()",
+        (METRIC_PARTS + "test_nci_and_inclination_match_the_definition_and_the_known_cases",),
+    ),
+    Mutation(
+        "group NEES from the inverse covariance's block instead of the marginal block's inverse",
+        "src/quadest/metrics/groups.py",
+        "    block = rows @ np.swapaxes(rows, -1, -2)\n",
+        "    block = np.linalg.inv(np.linalg.inv(factor @ np.swapaxes(factor, -1, -2))[:, index][:, :, index])\n",
+        (METRIC_PARTS + "test_group_nees_uses_the_inverse_of_the_marginal_block",),
+    ),
+    Mutation(
+        "steady-state window taken from the start",
+        "src/quadest/metrics/windows.py",
+        "steady = slice(K - max(1, round(settings.steady * K)), K)",
+        "steady = slice(0, max(1, round(settings.steady * K)))",
+        (METRIC_PARTS + "test_windowed_rmse_and_time_to_converge",),
+    ),
+    Mutation(
+        "a band share from a single surviving step",
+        "src/quadest/metrics/consistency.py",
+        "if steps.sum() < MIN_SHARE_OF_STEPS * (average_t.size - 1) or not steps.any():",
+        "if not steps.any():",
+        (METRIC_PARTS + "test_a_band_share_over_almost_no_steps_is_not_reported",),
+    ),
     Mutation(
         "diverged runs kept in the RMSE",
         "src/quadest/montecarlo/results.py",
@@ -367,9 +403,9 @@ MUTATIONS = (
     ),
     Mutation(
         "NIS band share with the state's degrees of freedom",
-        "src/quadest/evaluation/metrics.py",
-        '"nis_in_band": fraction_inside(res.nis_mean_t, m, res.alive_t)',
-        '"nis_in_band": fraction_inside(res.nis_mean_t, n, res.alive_t)',
+        "src/quadest/metrics/builtin.py",
+        '"nis_in_band": fraction_inside(result.nis_mean_t, m, result.alive_t)',
+        '"nis_in_band": fraction_inside(result.nis_mean_t, model.n_err, result.alive_t)',
         (BANDS + "test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis[linear]",
          BANDS + "test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis[attitude]"),
     ),

@@ -48,6 +48,8 @@ from quadest.estimators.base import Estimator
 from quadest.estimators.particle_smoothing import ffbsi
 from quadest.estimators.smoother_settings import SmootherSettings
 from quadest.estimators.smoothing import fixed_lag, rts_backward
+from quadest.metrics.base import BatchStart, StepView
+from quadest.metrics.registry import all_metrics
 from quadest.models.base import FilterModel
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
@@ -100,6 +102,7 @@ class EstimatorTracker:
         divergence_bound: float,
         saved_runs: int = 0,
         sensor_names: tuple[str, ...] = (),
+        sample_times: np.ndarray | None = None,
     ) -> None:
         B, K1 = start.x0.shape[0], steps + 1
         n, nc = model.n_err, start.companion0.shape[-1]
@@ -121,6 +124,8 @@ class EstimatorTracker:
         self.is_cloud = not {"cloud", "no_covariance"}.isdisjoint(est.capabilities)  # NEES may be unavailable
         self.sensor_nis = {s: (np.zeros(B), np.zeros(B)) for s in sensor_names}
         self.elapsed = 0.0
+        batch = BatchStart(model, np.arange(K1) * model.dt if sample_times is None else sample_times, B)
+        self.accumulators = [acc for metric in all_metrics() if (acc := metric.start(batch)) is not None]
         if "random" in est.capabilities:
             est.set_generators([np.random.default_rng(seed) for seed in start.estimator_seeds])
         t0 = time.perf_counter()
@@ -191,7 +196,8 @@ class EstimatorTracker:
         with np.errstate(invalid="ignore"):
             too_big = ~(np.abs(err) <= self.bound).all(-1)
         self.flag(too_big, k, f"state error beyond divergence_bound={self.bound}")
-        nees = _mahalanobis_sq(err, _covariance_factor(est))
+        factor = _covariance_factor(est)
+        nees = _mahalanobis_sq(err, factor)
         if not self.is_cloud:
             self.flag(~np.isfinite(nees), k, "covariance not positive definite")
         nees_ok = np.isfinite(nees)
@@ -199,7 +205,9 @@ class EstimatorTracker:
         alive = ~self.diverged
         self.sq[alive] += err[alive] ** 2
         self.csq[alive] += (self.companion[alive] - companion_truth[alive]) ** 2
-        self.dsq[alive] += model.derived_errors(est.mean[alive], truth[alive]) ** 2
+        derived = np.full((B, self.dsq.shape[1]), np.nan)
+        derived[alive] = model.derived_errors(est.mean[alive], truth[alive])
+        self.dsq[alive] += derived[alive] ** 2
         self.steps[alive] += 1
         counted = alive & nees_ok
         self.nees_sum[counted] += nees[counted]
@@ -211,6 +219,9 @@ class EstimatorTracker:
             self.nees_t[k] = nees[counted].mean()
         if alive.any():
             self.nis_t[k] = nis[alive].mean()
+        view = StepView(k, err, derived, self.companion - companion_truth, factor, nees, nis, alive)
+        for accumulator in self.accumulators:
+            accumulator.step(view)
         self._record(k)
 
     def result(self) -> EstimatorResult:
@@ -227,6 +238,7 @@ class EstimatorTracker:
             reasons=self.reasons, step_time_us=self.elapsed / self.K / B * 1e6, saved=saved,
             sensor_nis=self.sensor_nis, nees_steps=self.nees_steps, diagnostics=diagnostics,
             derived_sq_error_sum=self.dsq,
+            metric_values={k: v for acc in self.accumulators for k, v in acc.finish().items()},
         )  # fmt: skip
 
 
@@ -344,7 +356,7 @@ def run_estimator(
     recorder = SmoothingRecorder(est, smoother) if smoother is not None else None
     tracker = EstimatorTracker(
         name, est, data.model, FilterStart.of(data), data.time.size - 1, divergence_bound, saved_runs,
-        tuple(data.sensors),
+        tuple(data.sensors), data.time,
     )  # fmt: skip
     if recorder is not None:
         recorder.start()
@@ -383,7 +395,7 @@ def _smoothed_result(
     replay = _Replay(data.model, means, spreads, capabilities)
     tracker = EstimatorTracker(
         filtered.name + recorder.settings.label_suffix, replay, data.model, start, data.time.size - 1, bound,
-        saved_runs, tuple(data.sensors),
+        saved_runs, tuple(data.sensors), data.time,
     )  # fmt: skip
     tracker.flag(filtered.diverged, 1, lambda i: f"left out: the filter lost this run ({filtered.reasons.get(i, '')})")
     for k in range(1, tracker.K + 1):

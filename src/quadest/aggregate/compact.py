@@ -19,7 +19,8 @@ The full aggregate of a 1000-cell UT grid is tens of MB (one row per job × esti
   best (the full aggregate's table);
 - ``timing``: the wall time of the sweep and each estimator's time per step and run;
 - the heat maps of :func:`quadest.aggregate.versus_best.heat_maps` in the compact style (one colour
-  scale per panel, a palette PNG); and ``report.md``, which lists and links these.
+  scale per panel, a palette PNG), the cost–accuracy figure
+  (:func:`quadest.aggregate.figures.cost_accuracy`); and ``report.md``, which lists and links these.
 
 It does not write ``cells.csv``, ``paired.csv``, ``jobs.csv``, the ``rmse``/``divergence``/
 ``paired_summary`` tables or the other figures; ``quadest-aggregate SWEEP_DIR --output full``
@@ -33,6 +34,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from quadest.aggregate.figures import cost_accuracy
 from quadest.aggregate.statistics import timing_table
 from quadest.aggregate.versus_best import (
     COMPACT_STYLE,
@@ -157,4 +159,6 @@ def write_compact(
         md = f"Wall time of the sweep: {wall}.\n\n{_markdown(timing)}"
         (out / "timing.md").write_text(md)
         written.append({"name": "timing", "md": md})
+        (out / "figures").mkdir(exist_ok=True)
+        made = [*made, *cost_accuracy(cells, out / "figures" / "cost_accuracy")]
     return written, made

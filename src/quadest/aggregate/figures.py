@@ -1,6 +1,7 @@
 """Figures of a sweep: RMSE vs α with one line per (β, κ), α × β heatmaps per state group, RMSE
-vs sensor error scale per estimator, and per-state RMSE bars at each estimator's best cell; all
-with 95 % confidence intervals of the mean over runs. Each is saved as PNG and PDF."""
+vs sensor error scale per estimator, and per-state RMSE bars at each estimator's best cell, with
+95 % confidence intervals of the mean over runs; and in every sweep the cost–accuracy figure (RMSE
+against the time per step). Each is saved as PNG and PDF."""
 
 from __future__ import annotations
 
@@ -13,8 +14,7 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from quadest.aggregate.statistics import best_cells
-
-STATE_GROUPS = {"m/s": "velocities", "rad/s": "angle rates", "rad": "angles", "m": "positions"}
+from quadest.aggregate.versus_best import state_group
 
 
 def _param(params: list[str], suffix: str) -> str | None:
@@ -71,7 +71,8 @@ def figures(cells: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
             fig.suptitle(f"{est}: RMSE vs α (95 % CI of the mean over runs)")
             made += _save(fig, out / f"rmse_vs_alpha_{est}")
         if alpha and beta:
-            groups = list(dict.fromkeys(STATE_GROUPS.get(units[s], units[s]) for s in states))
+            group_of = dict(zip(filt["state"], state_group(filt), strict=False))
+            groups = list(dict.fromkeys(group_of[s] for s in states))
             kappas = sorted(part[kappa].unique()) if kappa else [None]
             fig, axes = plt.subplots(
                 len(kappas), len(groups), figsize=(3.6 * len(groups), 2.8 * len(kappas)), squeeze=False
@@ -79,7 +80,7 @@ def figures(cells: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
             for r, kv in enumerate(kappas):
                 sel = part if kv is None else part[part[kappa] == kv]
                 for c, group in enumerate(groups):
-                    g = sel[sel["state"].map(lambda s: STATE_GROUPS.get(units[s], units[s])) == group]
+                    g = sel[sel["state"].map(group_of) == group]
                     grid = g.groupby([beta, alpha])["rmse_mean"].mean().unstack(alpha)
                     ax = axes[r, c]
                     im = ax.imshow(grid.to_numpy(), aspect="auto", origin="lower", cmap="viridis")
@@ -88,7 +89,7 @@ def figures(cells: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
                     ax.set_xlabel("α")
                     ax.set_ylabel("β")
                     ax.set_title(f"{group}" + (f", κ={kv:g}" if kv is not None else ""), fontsize=9)
-                    unit = next((u for u, name in STATE_GROUPS.items() if name == group), group)
+                    unit = units[next(s for s in states if group_of[s] == group)]
                     fig.colorbar(im, ax=ax, label=f"mean RMSE [{unit}]")
             fig.suptitle(f"{est}: mean RMSE per state group over α × β")
             made += _save(fig, out / f"alpha_beta_heatmap_{est}")
@@ -103,7 +104,30 @@ def figures(cells: pd.DataFrame, params: list[str], out: Path) -> list[Path]:
         fig.suptitle("RMSE vs sensor error scale (95 % CI of the mean over runs)")
         made += _save(fig, out / "rmse_vs_error_scale")
     made += rmse_bars(cells, params, out / "rmse_bars")
+    made += cost_accuracy(cells, out / "cost_accuracy")
     return made
+
+
+def cost_accuracy(cells: pd.DataFrame, path: Path) -> list[Path]:
+    """What accuracy costs: per filter state, every cell's mean RMSE against its time per step and
+    run (µs, log scale), one marker colour per estimator, so the estimators that are both fast and
+    accurate sit at the lower left."""
+    filt = cells[cells["quantity"] == "filter"]
+    states = list(dict.fromkeys(filt["state"]))
+    units = dict(zip(filt["state"], filt["unit"], strict=False))
+    fig, axes = plt.subplots(1, len(states), figsize=(3.0 * len(states), 3.0), squeeze=False)
+    for i, (est, part) in enumerate(filt.groupby("estimator", sort=False)):
+        for ax, state in zip(axes[0], states, strict=True):
+            s = part[part["state"] == state]
+            ax.scatter(s["step_time_us"], s["rmse_mean"], s=12, color=f"C{i % 10}", label=est)
+    for ax, state in zip(axes[0], states, strict=True):
+        ax.set_xscale("log")
+        ax.set_xlabel("time per step and run [µs]")
+        ax.set_ylabel(f"RMSE {state} [{units[state]}]")
+        ax.grid(alpha=0.3, which="both")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("Cost and accuracy: mean RMSE over runs against the time per step, every cell")
+    return _save(fig, path)
 
 
 def rmse_bars(cells: pd.DataFrame, params: list[str], path: Path) -> list[Path]:

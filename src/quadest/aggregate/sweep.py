@@ -12,11 +12,23 @@ import yaml
 
 from quadest.evaluation.paired import paired_comparison
 
-# Columns the aggregate tables use themselves; an override with one of these names (``runs=20``)
-# becomes ``override.<name>``.
-OWN_COLUMNS = {"job", "status", "error", "commit", "estimator", "quantity", "state", "unit", "rmse_mean", "rmse_std",
-               "mse_mean", "runs", "diverged", "pooled_rmse", "pcrlb", "step_time_us", "mean_nees", "nees_in_band",
-               "mean_nis", "nis_in_band", "ci95_low", "ci95_high"}  # fmt: skip
+BASE_COLUMNS = {"job", "status", "error", "commit", "ci95_low", "ci95_high"}
+"""Columns the aggregate adds itself. With them, every column of a job's ``rmse_summary.csv`` and
+every metric of its ``summary.json`` entries (:func:`quadest.evaluation.job_tables.entry_metrics`)
+is the aggregate's own: an override with such a name (``runs=20``) becomes ``override.<name>``."""
+LEGACY_METRICS = ("step_time_us", "mean_nees", "nees_in_band", "mean_nis", "nis_in_band")
+"""The entry metrics of a job written before ``summary.json`` listed them (``metric_keys``)."""
+
+
+def own_columns(job_dir: Path) -> set[str]:
+    """The aggregate's own column names for a job folder (its tables' and metrics' names)."""
+    own = set(BASE_COLUMNS) | set(LEGACY_METRICS)
+    table, summary_file = job_dir / "rmse_summary.csv", job_dir / "summary.json"
+    if table.is_file():
+        own |= set(pd.read_csv(table, nrows=0).columns)
+    if summary_file.is_file():
+        own |= set(json.loads(summary_file.read_text()).get("metric_keys", ()))
+    return own
 
 
 def _value(text: str):
@@ -77,10 +89,11 @@ def load_sweep(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
         overrides_file = job_dir / ".hydra" / "overrides.yaml"
         overrides = yaml.safe_load(overrides_file.read_text()) if overrides_file.is_file() else []
         cell = {}
+        own = own_columns(job_dir)
         for item in overrides or []:
             key, _, value = str(item).partition("=")
             key = key.lstrip("+~")
-            key = f"override.{key}" if key in OWN_COLUMNS else key
+            key = f"override.{key}" if key in own else key
             if not key.startswith("hydra"):
                 cell[key] = _value(value)
                 if key not in params:
@@ -112,7 +125,7 @@ def load_sweep(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
         for name, est in summary["estimators"].items():
             part = table[table["estimator"] == name].copy()
             part["job"] = int(job_dir.name)
-            for key in ("step_time_us", "mean_nees", "nees_in_band", "mean_nis", "nis_in_band"):
+            for key in summary.get("metric_keys", LEGACY_METRICS):
                 part[key] = est.get(key)
             for key, value in cell.items():
                 part[key] = value if not isinstance(value, list) else str(value)

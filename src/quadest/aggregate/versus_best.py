@@ -1,18 +1,18 @@
 """Which cells of a sigma-point parameter sweep differ from the best cell beyond the paired 95 % CI.
 
-In a sweep over the UT parameters (α, β, κ) every cell with the same other settings (sensor
-level, scenario, ...) filters the same truth and measurements: the data do not depend on an
-estimator's parameters (docs/cache.md), so run ``i`` of two such cells is a paired sample. Such a
-set of cells is a *panel*. For each estimator, panel and state group (velocities, angle rates,
-angles, positions: the states sharing a unit), a run's score is the mean of its per-run RMSE over
-the group's states; the *best* cell has the smallest mean score, and every cell gets the paired
-difference to it, ``d_i = score_cell,i − score_best,i`` over the runs that diverged in neither, with
-the Student t 95 % interval of the mean difference, ``d̄ ± t_{0.975, n−1} s_d / √n``. A cell
-*differs* from the best when that interval lies above zero. Per-run differences below
-:data:`quadest.evaluation.paired.ROUND_OFF` times the best score count as zero (filters equal in exact
-arithmetic differ at round-off, systematically: docs of :mod:`quadest.evaluation.paired`). The intervals are
-per cell, not simultaneous over the grid: with many cells a few "differs" are expected by chance
-among cells that do not.
+In a sweep over the UT parameters (α, β, κ) every cell with the same other settings (sensor level,
+scenario, ...) filters the same truth and measurements: the data do not depend on an estimator's
+parameters (docs/cache.md), so run ``i`` of two such cells is a paired sample. Such a set of cells
+is a *panel*. For each estimator, panel and state group (the groups the model declares, ``group``
+of ``metrics.csv``: velocities, angle rates, angles on the quadrotor), a run's score is the mean of
+its per-run RMSE over the group's states; the *best* cell has the smallest mean score, and every
+cell gets the paired difference to it, ``d_i = score_cell,i − score_best,i`` over the runs that
+diverged in neither, with the Student t 95 % interval of the mean difference, ``d̄ ± t_{0.975, n−1}
+s_d / √n``. A cell *differs* from the best when that interval lies above zero. Per-run differences
+below :data:`quadest.evaluation.paired.ROUND_OFF` times the best score count as zero (filters equal
+in exact arithmetic differ at round-off, systematically: docs of :mod:`quadest.evaluation.paired`).
+The intervals are per cell, not simultaneous over the grid: with many cells a few "differs" are
+expected by chance among cells that do not.
 
 Reads each job's ``metrics.csv`` (per-run RMSE), so it needs the job folders of the sweep; the
 aggregate writes ``versus_best.csv`` and one heat map per estimator and state group
@@ -41,6 +41,18 @@ from quadest.evaluation.paired import CONFIDENCE, ROUND_OFF
 
 UT_PARAMETERS = ("alpha", "beta", "kappa")
 GROUPS = {"m/s": "velocities", "rad/s": "angle rates", "rad": "angles", "m": "positions"}
+"""State groups by unit, for a ``metrics.csv`` written before it had the model's ``group`` column."""
+
+
+def state_group(rows: pd.DataFrame) -> pd.Series:
+    """Each row's state group: the model's declaration (``group``,
+    :attr:`quadest.models.base.FilterModel.state_groups`, underscores shown as spaces), else the
+    group of its unit (:data:`GROUPS`)."""
+    by_unit = rows["unit"].map(lambda u: GROUPS.get(u, u))
+    if "group" not in rows:
+        return by_unit
+    declared = rows["group"].where(rows["group"].notna() & (rows["group"] != ""))
+    return declared.str.replace("_", " ").fillna(by_unit)
 
 
 def ut_parameter(params: list[str], name: str) -> str | None:
@@ -58,7 +70,7 @@ def run_scores(sweep_dir: Path, jobs: pd.DataFrame, params: list[str]) -> pd.Dat
             continue
         metrics = pd.read_csv(path)
         metrics = metrics[metrics["quantity"] == "filter"]
-        metrics = metrics.assign(group=metrics["unit"].map(lambda u: GROUPS.get(u, u)))
+        metrics = metrics.assign(group=state_group(metrics))
         score = metrics.groupby(["estimator", "group", "run"], sort=False).agg(
             score=("rmse", "mean"), diverged=("diverged", "any")
         )

@@ -32,7 +32,13 @@ from quadest.app.sizing import is_long
 from quadest.cache.lookup import JobCache
 from quadest.estimators.registry import estimator_parameters
 from quadest.evaluation.formatting import strict_json
-from quadest.evaluation.job_tables import MetricTables, estimator_entries, with_cache_column, write_tables
+from quadest.evaluation.job_tables import (
+    MetricTables,
+    estimator_entries,
+    overview_keys,
+    with_cache_column,
+    write_tables,
+)
 from quadest.evaluation.paired import summary_lines
 from quadest.montecarlo.results import EstimatorResult
 
@@ -209,6 +215,7 @@ def finish_job(kind: JobKind, job: JobSettings, out_dir: Path, overrides: list[s
         **provenance(),
         "overrides": list(overrides or []),
         **report.fields,
+        "metric_keys": overview_keys(report.tables.overview),
         "cache": {"enabled": bool(exp.cache.enabled), "data_from_cache": ran.data_from_cache},
         "estimators": estimator_entries(rows.results, report.tables, rows.params, rows.from_cache),
     }
@@ -216,8 +223,9 @@ def finish_job(kind: JobKind, job: JobSettings, out_dir: Path, overrides: list[s
     summary["_table"] = report.tables.printed
     summary["_paired"] = summary_lines(report.tables.paired)
     summary["_caption"] = report.caption
-    if report.after_table is not None:
-        summary["_after_table"] = report.after_table
+    after = "\n".join(text for text in (report.tables.further, report.after_table) if text)
+    if after:
+        summary["_after_table"] = after
     return summary
 
 

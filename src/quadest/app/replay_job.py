@@ -38,12 +38,13 @@ import pandas as pd
 
 from quadest.app.open_loop_job import OpenLoopJob
 from quadest.app.pipeline import Finished, Report
-from quadest.app.schema import ExperimentConf
 from quadest.evaluation.captions import table_caption
 from quadest.evaluation.formatting import markdown_table
-from quadest.evaluation.job_tables import MetricTables
-from quadest.evaluation.metrics import estimator_overview, parameter_columns, summarize
+from quadest.evaluation.job_tables import MetricTables, further_measures
+from quadest.evaluation.metrics import estimator_overview, metric_rows, metric_summary, summarize
 from quadest.evaluation.paired import paired_comparison
+from quadest.metrics.quantiles import error_quantiles
+from quadest.metrics.windows import windowed
 from quadest.models.attitude import attitude_errors_deg
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
@@ -51,6 +52,11 @@ from quadest.numerics import quaternion as quat
 
 ANGLES = ("roll", "pitch", "yaw")
 QUANTITY = "difference to PX4"
+ROWS = [(QUANTITY, state, "deg") for state in (*ANGLES, "attitude")]
+"""The rows of a replay's tables: the Euler angles and the attitude difference as one rotation angle
+on SO(3) (:func:`quadest.models.attitude.attitude_errors_deg`)."""
+ROW_ORDER = [1, 2, 3, 0]
+"""Where each of :data:`ROWS` is in :func:`~quadest.models.attitude.attitude_errors_deg`'s output."""
 PX4 = "PX4 onboard estimate"
 SMOOTHED = "+smoothed"
 NOT_APPLICABLE = (
@@ -70,25 +76,28 @@ def rms_difference(diff: np.ndarray, window: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(diff[window] ** 2, axis=0))
 
 
-def _table(results, diffs, window, data: MonteCarloData, params, cfg: ExperimentConf) -> pd.DataFrame:
-    columns = parameter_columns(params)
-    rows = []
-    for res in results:
-        rms = rms_difference(diffs[res.name], window)
-        p = params.get(res.name, {})
-        for j, state in enumerate(ANGLES):
-            row = {
-                "estimator": res.name, "kind": p.get("kind", res.name), "run": 0, "state": state, "unit": "deg",
-                "quantity": QUANTITY, "rmse": rms[j], "diverged": bool(res.diverged[0]),
-                "diverged_step": int(res.diverged_step[0]), "failure_reason": res.reasons.get(0, ""),
-                "mean_nees": np.nan, "mean_nis": float(res.mean_nis[0]), "step_time_us": res.step_time_us,
-            }  # fmt: skip
-            row.update({c: (str(v) if isinstance(v := p.get(c, np.nan), list | tuple | dict) else v) for c in columns})
-            rows.append(row)
-    table = pd.DataFrame(rows)
-    for key, value in {**data.labels, "seed": int(cfg.seed), "runs": 1}.items():
-        table[key] = value
-    return table
+def _state_values(diffs: dict[str, np.ndarray], window: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+    """Each estimator's per-state columns of ``metrics.csv`` over the rows :data:`ROWS`: the RMS
+    difference and the quantiles of the absolute difference over ``window`` (one run)."""
+    return {
+        name: {
+            "rmse": rms_difference(d, window)[None],
+            **{k: v[None] for k, v in error_quantiles(d[window], 0).items()},
+        }
+        for name, d in diffs.items()
+    }
+
+
+def _windowed(diffs: dict[str, np.ndarray], time: np.ndarray, window: np.ndarray, settings) -> dict[str, dict]:
+    """Each estimator's transient and steady-state RMS difference and its settling time over the
+    steps of ``window`` (:func:`quadest.metrics.windows.windowed`; a diverged step counts no run)."""
+    out = {}
+    for name, d in diffs.items():
+        kept = d[window]
+        alive = np.isfinite(kept).all(axis=-1).astype(float)
+        out[name] = windowed(time[window] - time[window][0], np.where(np.isfinite(kept), kept, 0.0) ** 2, alive,
+                             settings)  # fmt: skip
+    return out
 
 
 def _printed(summary: pd.DataFrame) -> pd.DataFrame:
@@ -211,16 +220,21 @@ class ReplayJob(OpenLoopJob):
         reference = data.truth[0]
         window = data.time >= data.time[0] + data.labels["warmup"]
         # roll, pitch, yaw of the estimate minus PX4's, wrapped to ±180° (NaN once a run diverged)
-        diffs = {res.name: attitude_errors_deg(res.saved["estimate"][0], reference)[:, 1:] for res in results}
-        table = _table(results, diffs, window, data, params, cfg)
+        diffs = {res.name: attitude_errors_deg(res.saved["estimate"][0], reference)[:, ROW_ORDER] for res in results}
+        labels = {**data.labels, "seed": int(cfg.seed), "runs": 1}
+        table = metric_rows(results, data.model, params, labels, ROWS, _state_values(diffs, window))
         summary_table = summarize(table).assign(pooled_rmse=lambda s: s["rmse_mean"], pcrlb=np.nan)
-        with warnings.catch_warnings():  # NaN NEES everywhere, and NIS for filters without innovations
+        windows = _windowed(diffs, data.time, window, cfg.metrics)
+        summary_table = summary_table.merge(
+            metric_summary(results, table, data.model, cfg.metrics, windows), on=["estimator", "quantity", "state"]
+        )
+        with warnings.catch_warnings():  # NIS for filters without innovations
             warnings.simplefilter("ignore", RuntimeWarning)
-            overview = estimator_overview(results, data.model.n_err, data.model.m)
-        overview = overview.drop(columns=["mean_nees", "nees_dof", "nees_in_band"])
+            overview = estimator_overview(results, data.model, truth=False)
         printed = _printed(summary_table)
         paired = paired_comparison(table, int(cfg.seed))
-        tables = MetricTables(table, summary_table, overview, printed, paired, preamble=caption(data, results) + "\n\n")
+        tables = MetricTables(table, summary_table, overview, printed, paired, preamble=caption(data, results) + "\n\n",
+                              further=further_measures(summary_table, overview))  # fmt: skip
         ref_angles = euler_deg(reference)
         angles = {res.name: euler_deg(res.saved["estimate"][0]) for res in results}
         arrays = {"time": data.time, "reference": reference, "reference_angles_deg": ref_angles}

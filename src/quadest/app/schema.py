@@ -23,6 +23,7 @@ from quadest.config.closed_loop import ClosedLoopConf
 from quadest.errors import ConfigError
 from quadest.estimators.registry import builtin_estimators
 from quadest.evaluation.objective import ObjectiveConf
+from quadest.metrics.settings import MetricsConf
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import SourceConf
 from quadest.sensors.barometer import BarometerSpec
@@ -120,6 +121,7 @@ class ExperimentConf:
     closed_loop: ClosedLoopConf = field(default_factory=ClosedLoopConf)
     source: SourceConf | None = None  # a flight log instead of the simulation (conf/experiment/px4_replay.yaml)
     decision: DecisionConf = field(default_factory=DecisionConf)
+    metrics: MetricsConf = field(default_factory=MetricsConf)  # windows of the windowed measures (docs/metrics.md)
 
 
 def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:

@@ -48,6 +48,7 @@ def validate_run(experiment: ExperimentConf) -> None:
             f"must be at least one sample period (sample_period={experiment.sample_period})",
         )
     require_positive("divergence_bound", experiment.divergence_bound)
+    experiment.metrics.check()
     if experiment.workers < 0:
         allowed = "must be >= 0 (0: one process per estimator, up to the CPU count)"
         raise ConfigError("workers", experiment.workers, allowed)

@@ -43,6 +43,7 @@ RESULT_NEUTRAL = (
     "output.figures",
     "output.per_estimator_figures",
     "objective",
+    "metrics",
     "cache",
     "sweep",
     "hydra",
@@ -51,10 +52,11 @@ RESULT_NEUTRAL = (
 """Config paths (a node stands for its whole subtree) that change no cached value, and so are in
 no key: progress bars, worker processes, which figures are drawn, the tuning objective (computed
 from ``summary.json`` after the job), the cache's own settings, Hydra's output folders and
-launchers, ``sweep``, which only holds values that other keys interpolate (they are resolved
-into those keys before hashing), and ``decision``, how a ``runs=auto`` job decides how many runs
-to make (each of its batches is keyed by its own runs, docs/experiments.md). The one place where
-a setting is declared result-neutral."""
+launchers, the windows of the windowed measures (``metrics``: applied to per-step sums every result
+keeps), ``sweep``, which only holds values that other keys interpolate (they are resolved into
+those keys before hashing), and ``decision``, how a ``runs=auto`` job decides how many runs to
+make (each of its batches is keyed by its own runs, docs/experiments.md). The one place where a
+setting is declared result-neutral."""
 RUNNER_KEYS = ("divergence_bound", "output.saved_runs")
 """Settings of the runner (:func:`quadest.runner.run_estimator`): every estimator's result depends
 on them, the data does not. They are in the estimator key."""

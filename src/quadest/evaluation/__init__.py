@@ -1,7 +1,6 @@
 """The evaluation layer: scoring estimator results and presenting them.
 
 - :mod:`~quadest.evaluation.metrics`: RMSE, NEES, NIS and the per-run tables;
-- :mod:`~quadest.evaluation.consistency`: the χ² bands of the consistency tests;
 - :mod:`~quadest.evaluation.paired`: paired comparisons of estimators on the same runs;
 - :mod:`~quadest.evaluation.pcrlb`: the posterior Cramér–Rao lower bound;
 - :mod:`~quadest.evaluation.plotting`: a job's figures;

@@ -15,13 +15,26 @@ import numpy as np
 import pandas as pd
 
 from quadest.evaluation.formatting import markdown_table
-from quadest.evaluation.metrics import estimator_overview, floor_table, rmse_table, summarize, tidy_metrics
+from quadest.evaluation.metrics import (
+    estimator_overview,
+    floor_table,
+    metric_summary,
+    rmse_table,
+    summarize,
+    tidy_metrics,
+)
 from quadest.evaluation.paired import paired_comparison, paired_markdown
+from quadest.metrics.settings import MetricsConf
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
 
 OVERVIEW_KEYS = ("mean_nees", "nees_in_band", "mean_nis", "nis_in_band", "step_time_us")
-"""Columns of :func:`quadest.evaluation.metrics.estimator_overview` that go into each estimator's summary."""
+"""Columns of :func:`quadest.evaluation.metrics.estimator_overview` that go first into each
+estimator's summary; every further overview column follows them (:func:`overview_keys`)."""
+NOT_IN_SUMMARY = ("estimator", "diverged", "runs", "nees_dof", "nis_dof")
+"""Overview columns that ``summary.json`` holds elsewhere (or not at all: the dof are the job's)."""
+SUMMARY_STATS = {"rmse_mean": "mean", "rmse_std": "std", "pooled_rmse": "pooled", "pcrlb": "pcrlb"}
+"""``rmse_summary.csv`` columns and their names in ``summary.json``'s per-state ``rmse`` entries."""
 
 
 @dataclass
@@ -36,6 +49,9 @@ class MetricTables:
     paired: pd.DataFrame
     preamble: str = ""
     """Text above the printed table in ``rmse_table.md`` (a replay's caption); empty for most jobs."""
+    further: str = ""
+    """The further measures in short (:func:`further_measures`), printed after the table and at the
+    end of ``rmse_table.md``."""
 
 
 def json_float(value) -> float | None:
@@ -51,21 +67,64 @@ def metric_tables(
     labels: dict,
     bound: np.ndarray,
     seed: int,
+    settings: MetricsConf | None = None,
 ) -> MetricTables:
     """The metric tables of a job whose results are errors against a truth (open and closed loop).
 
-    ``labels`` become columns of ``metrics.csv``; ``bound`` is the PCRLB (K+1, n_err) or NaN.
+    ``labels`` become columns of ``metrics.csv``; ``bound`` is the PCRLB (K+1, n_err) or NaN;
+    ``settings`` the windows of the windowed measures (default: :class:`MetricsConf`'s).
     Nothing is written: :func:`write_tables` does that.
     """
+    keys = ["estimator", "quantity", "state"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         table = tidy_metrics(results, data, params, labels)
-        summary = summarize(table).merge(
-            floor_table(results, data, bound), on=["estimator", "quantity", "state"], how="left"
-        )
-        overview = estimator_overview(results, data.model.n_err, data.model.m)
+        summary = summarize(table).merge(floor_table(results, data, bound), on=keys, how="left")
+        summary = summary.merge(metric_summary(results, table, data.model, settings or MetricsConf()), on=keys)
+        overview = estimator_overview(results, data.model)
     printed = rmse_table(summary)
-    return MetricTables(table, summary, overview, printed, paired_comparison(table, seed))
+    further = further_measures(summary, overview)
+    return MetricTables(table, summary, overview, printed, paired_comparison(table, seed), further=further)
+
+
+def further_measures(summary: pd.DataFrame, overview: pd.DataFrame) -> str:
+    """The measures beside the RMSE in short (docs/metrics.md): per filter state (every row where
+    there are none) and estimator the median and 95th percentile of the absolute error and the time
+    to converge; per estimator the credibility indices and the NEES band share of each state group."""
+    rows = summary[summary["quantity"] == "filter"] if (summary["quantity"] == "filter").any() else summary
+
+    def cell(r) -> str:
+        settle = "-" if not np.isfinite(r["time_to_converge_s"]) else f"{r['time_to_converge_s']:.2g} s"
+        return f"{r['abs_error_median']:.3g} / {r['abs_error_p95']:.3g} / {settle}"
+
+    text = rows.assign(
+        cell=[cell(r) for r in rows.to_dict("records")],
+        row=[f"{s} [{u}]" for s, u in zip(rows["state"], rows["unit"], strict=True)],
+    )
+    wide = text.pivot_table(index="row", columns="estimator", values="cell", aggfunc="first", sort=False)
+    wide.columns.name = None
+    lines = [
+        "Median / 95th percentile of |error| over the steps (the median over runs of the per-run medians, the mean "
+        "of the per-run 95th percentiles) / time to converge (docs/metrics.md; -: not settled by the end):",
+        wide.reset_index().rename(columns={"row": "state"}).to_string(index=False),
+    ]
+    groups = [c for c in overview.columns if c.startswith("nees_in_band_")]
+    if "nci" in overview:
+        lines.append("Credibility (Li, Zhao & Jilkov 2002; dB, 0 = credible, inclination > 0 optimistic) and the "
+                     "NEES band share per state group:")  # fmt: skip
+        for r in overview.to_dict("records"):
+            shares = ", ".join(f"{g.removeprefix('nees_in_band_')} {_share(r[g])}" for g in groups)
+            nci, inclination = _number(r["nci"]), _number(r["inclination"], "+")
+            lines.append(f"  {r['estimator']:>8s}: NCI {nci}, inclination {inclination}; in band: {shares}")
+    return "\n".join(lines) + "\n\n"
+
+
+def _number(value: float, sign: str = "") -> str:
+    return "n/a" if not np.isfinite(value) else f"{value:{sign}.2f} dB"
+
+
+def _share(value: float) -> str:
+    return "n/a" if not np.isfinite(value) else f"{100 * value:.0f}%"
 
 
 def with_cache_column(tables: MetricTables, from_cache: dict[str, bool]) -> MetricTables:
@@ -82,9 +141,10 @@ def write_tables(out_dir: Path, tables: MetricTables) -> None:
     tables.table.to_csv(out_dir / "metrics.csv", index=False)
     tables.summary.to_csv(out_dir / "rmse_summary.csv", index=False)
     tables.paired.to_csv(out_dir / "paired_comparison.csv", index=False)
+    further = f"\n```\n{tables.further}```\n" if tables.further else ""
     (out_dir / "rmse_table.md").write_text(
         tables.preamble + markdown_table(tables.printed) + "\n" + markdown_table(tables.overview.round(4))
-        + paired_markdown(tables.paired)
+        + paired_markdown(tables.paired) + further
     )  # fmt: skip
 
 
@@ -100,13 +160,26 @@ def estimator_entries(
     return entries
 
 
+def overview_keys(overview: pd.DataFrame) -> list[str]:
+    """The overview columns each estimator's ``summary.json`` entry holds, in order."""
+    further = [c for c in overview.columns if c not in OVERVIEW_KEYS and c not in NOT_IN_SUMMARY]
+    return [*OVERVIEW_KEYS, *further]
+
+
+def summary_state_columns(summary: pd.DataFrame) -> list[str]:
+    """The metrics' columns of ``rmse_summary.csv`` beyond the RMSE statistics, in order."""
+    fixed = {"estimator", "quantity", "state", "unit", "group", "rmse_mean", "rmse_std", "mse_mean", "runs", "diverged"}
+    return [c for c in summary.columns if c not in fixed and c not in SUMMARY_STATS]
+
+
 def _entry(res: EstimatorResult, row: dict, summary: pd.DataFrame, parameters: dict, from_cache: bool) -> dict:
     rows = summary[summary["estimator"] == res.name]
+    further = summary_state_columns(summary)
     return {
         "parameters": parameters,
         "diverged": row["diverged"],
         "failure_reasons": {str(k): v for k, v in res.reasons.items()},
-        **{key: json_float(row.get(key, np.nan)) for key in OVERVIEW_KEYS},
+        **{key: json_float(row.get(key, np.nan)) for key in overview_keys(pd.DataFrame([row]))},
         "from_cache": from_cache,
         "nis_by_sensor": {
             sensor: json_float(np.nanmean(res.mean_sensor_nis(sensor))) if (~res.diverged).any() else None
@@ -115,7 +188,8 @@ def _entry(res: EstimatorResult, row: dict, summary: pd.DataFrame, parameters: d
         "rmse": {
             r["state"]: {"mean": json_float(r["rmse_mean"]), "std": json_float(r["rmse_std"]),
                          "pooled": json_float(r["pooled_rmse"]), "pcrlb": json_float(r["pcrlb"]),
-                         "quantity": r["quantity"], "unit": r["unit"]}
+                         "quantity": r["quantity"], "unit": r["unit"],
+                         **{c: json_float(r[c]) for c in further}}
             for r in rows.to_dict("records")
         },
     }  # fmt: skip

@@ -19,7 +19,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from quadest.evaluation.consistency import fraction_inside
+from quadest.metrics.base import AGGREGATES, state_rows
+from quadest.metrics.registry import all_metrics
+from quadest.metrics.settings import MetricsConf
+from quadest.metrics.windows import convergence_time
+from quadest.models.base import FilterModel
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
 
@@ -37,46 +41,113 @@ def tidy_metrics(
     run_labels: dict,
 ) -> pd.DataFrame:
     """One row per estimator × run × state (filter states, derived errors, companion values)."""
-    model = data.model
+    return metric_rows(results, data.model, estimator_params, {**data.labels, **run_labels})
+
+
+def metric_rows(
+    results: list[EstimatorResult],
+    model: FilterModel,
+    estimator_params: dict[str, dict],
+    labels: dict,
+    rows: list[tuple[str, str, str]] | None = None,
+    state_values: dict[str, dict[str, np.ndarray]] | None = None,
+) -> pd.DataFrame:
+    """``metrics.csv`` of every job kind: one row per estimator × run × row of ``rows``
+    ((quantity, state, unit); by default the model's state table,
+    :func:`quadest.metrics.base.state_rows`), the columns every metric declares
+    (:func:`quadest.metrics.registry.all_metrics`, in order; the estimators' parameter columns
+    after the time per step), the state's group (``model.state_groups``) and ``labels``.
+
+    ``state_values`` (estimator → column → (B, len(rows))) replaces the per-state columns of a job
+    whose rows are not the model's state table (a flight-log replay); the columns of metrics that
+    need the true state are then empty."""
+    own_rows = rows is None
+    rows = state_rows(model) if own_rows else rows
+    group_of = {s: g for g, states in model.state_groups.items() for s in states}
     columns = parameter_columns(estimator_params)
     frames = []
     for res in results:
-        B = res.rmse.shape[0]
+        B, R = res.diverged.shape[0], len(rows)
         params = estimator_params.get(res.name, {})
-        blocks = [
-            ("filter", model.error_names, model.error_units, res.rmse),
-            ("derived", model.derived_error_names, model.derived_error_units, res.derived_rmse),
-            ("companion", model.companion_names, model.companion_units, res.companion_rmse),
-        ]
-        for quantity, names, units, values in blocks:
-            for j, (state, unit) in enumerate(zip(names, units, strict=True)):
-                frame = pd.DataFrame(
-                    {
-                        "estimator": res.name,
-                        "kind": params.get("kind", res.name),
-                        "run": np.arange(B),
-                        "state": state,
-                        "unit": unit,
-                        "quantity": quantity,
-                        "rmse": values[:, j],
-                        "diverged": res.diverged,
-                        "diverged_step": res.diverged_step,
-                        "failure_reason": [res.reasons.get(i, "") for i in range(B)],
-                        "mean_nees": res.mean_nees,
-                        "mean_nis": res.mean_nis,
-                        "step_time_us": res.step_time_us,
-                    }
-                )
+        frame = {
+            "estimator": res.name,
+            "kind": params.get("kind", res.name),
+            "run": np.tile(np.arange(B), R),
+            "state": np.repeat([s for _, s, _ in rows], B),
+            "unit": np.repeat([u for _, _, u in rows], B),
+            "quantity": np.repeat([q for q, _, _ in rows], B),
+        }
+        for metric in all_metrics():
+            if metric.name == "diagnostics":
                 for p in columns:
                     value = params.get(p, np.nan)
                     frame[p] = str(value) if isinstance(value, list | tuple | dict) else value
-                for key, per_run in res.diagnostics.items():
-                    frame[key] = per_run
-                frames.append(frame)
+            declared = {c.name: c.per for c in metric.columns(model)}
+            replaced = None if own_rows else (state_values or {}).get(res.name, {})
+            for name, value in metric.values(res, model).items():
+                per = declared.get(name, "run")
+                if replaced is not None and per == "state":
+                    value = replaced.get(name, np.full((B, R), np.nan))
+                elif replaced is not None and metric.needs_truth:
+                    value = {"state": np.full((B, R), np.nan), "run": np.full(B, np.nan)}.get(per, np.nan)
+                frame[name] = _expand(value, per, B, R)
+        frame["group"] = np.repeat([group_of.get(s, "") if q == "filter" else "" for q, s, _ in rows], B)
+        frames.append(pd.DataFrame(frame))
     table = pd.concat(frames, ignore_index=True)
-    for key, value in {**data.labels, **run_labels}.items():
+    for key, value in labels.items():
         table[key] = value
     return table
+
+
+def _expand(value, per: str, B: int, R: int):
+    """A column's values as one per row of ``metric_rows``' frame (state-major, runs within)."""
+    if per == "state":
+        return np.asarray(value).T.ravel()
+    if per == "run":
+        value = np.asarray(value) if not isinstance(value, list) else np.array(value, dtype=object)
+        return np.tile(value, R)
+    return value
+
+
+def metric_summary(
+    results: list[EstimatorResult],
+    table: pd.DataFrame,
+    model: FilterModel,
+    settings: MetricsConf,
+    custom: dict[str, dict[str, np.ndarray]] | None = None,
+) -> pd.DataFrame:
+    """The metrics' columns of ``rmse_summary.csv`` per estimator, quantity and state: each
+    per-state column of ``table`` reduced over the runs that did not diverge by its declared
+    aggregate, and the columns a metric computes itself (:meth:`quadest.metrics.base.Metric.summary`;
+    ``custom``: estimator → column → (R,) values for rows that are not the model's), and the state's
+    ``group``."""
+    keys = ["estimator", "quantity", "state"]
+    ok = table[~table["diverged"].astype(bool)]
+    out = table[[*keys, "group"]].drop_duplicates(keys).reset_index(drop=True)
+    for metric in all_metrics():
+        for column in metric.columns(model):
+            if column.per != "state" or column.name == "rmse":  # rmse: summarize's statistics
+                continue
+            reduce = AGGREGATES[column.aggregate]
+            stats = ok.groupby(keys, sort=False)[column.name].agg(lambda v, f=reduce: _finite(f, v.to_numpy(float)))
+            out = out.merge(stats.rename(column.name).reset_index(), on=keys, how="left")
+        extra = metric.summary_columns(model)
+        if not extra:
+            continue
+        parts = []
+        for res in results:
+            part = out.loc[out["estimator"] == res.name, keys].copy()
+            values = (custom or {}).get(res.name) if custom is not None else metric.summary(res, model, settings)
+            for name in extra:
+                part[name] = values[name] if values is not None and name in values else np.nan
+            parts.append(part)
+        out = out.merge(pd.concat(parts), on=keys, how="left")
+    return out
+
+
+def _finite(reduce, values: np.ndarray) -> float:
+    values = values[np.isfinite(values)]
+    return float(reduce(values)) if values.size else np.nan
 
 
 def summarize(table: pd.DataFrame) -> pd.DataFrame:
@@ -141,27 +212,19 @@ def rmse_table(summary: pd.DataFrame) -> pd.DataFrame:
     return wide.reset_index().drop(columns="quantity").rename(columns={"row": "state"})
 
 
-def estimator_overview(results: list[EstimatorResult], n: int, m: int) -> pd.DataFrame:
-    """Per estimator: diverged runs, average NEES (n dof) and NIS (m dof) over runs and time, the
-    fraction of time steps whose run-averaged NEES and NIS lie in the 95 % χ² band, and the time
-    per step."""
+def estimator_overview(results: list[EstimatorResult], model: FilterModel, truth: bool = True) -> pd.DataFrame:
+    """Per estimator: every metric's overview entries (:meth:`quadest.metrics.base.Metric.overview`):
+    diverged runs, average NEES (n_err dof) and NIS (m dof) over runs and time, the fraction of time
+    steps whose run-averaged NEES and NIS lie in the 95 % χ² band, the time per step and the further
+    metrics' per-estimator values. Without ``truth`` (a flight log) the metrics that need the true
+    state are left out."""
     rows = []
     for res in results:
-        alive = (~res.diverged).any()
-        rows.append(
-            {
-                "estimator": res.name,
-                "diverged": int(res.diverged.sum()),
-                "runs": int(res.diverged.size),
-                "mean_nees": float(np.nanmean(res.mean_nees)) if alive else np.nan,
-                "nees_dof": n,
-                "nees_in_band": fraction_inside(res.nees_mean_t, n, res.alive_t),
-                "mean_nis": float(np.nanmean(res.mean_nis)) if alive else np.nan,
-                "nis_dof": m,
-                "nis_in_band": fraction_inside(res.nis_mean_t, m, res.alive_t),
-                "step_time_us": res.step_time_us,
-            }
-        )
+        row = {"estimator": res.name}
+        for metric in all_metrics():
+            if truth or not metric.needs_truth:
+                row.update(metric.overview(res, model))
+        rows.append(row)
     return pd.DataFrame(rows)
 
 
@@ -170,17 +233,6 @@ CONVERGENCE_FRACTION = 0.5
 prior standard deviation (the error halved relative to what the filter started from)."""
 FINAL_FRACTION = 0.1
 """The last fraction of the steps over which the final RMS of :func:`convergence_table` is taken."""
-
-
-def convergence_time(time: np.ndarray, rms: np.ndarray, threshold: float) -> float:
-    """The first time ``time[k]`` from which ``rms[k:]`` stays below ``threshold``: ``time[0]``
-    if it never exceeds it, NaN if its last value does not lie below (NaN values count as not
-    below: no run alive)."""
-    below = rms < threshold
-    if not below[-1]:
-        return float("nan")
-    above = np.flatnonzero(~below)
-    return float(time[above[-1] + 1] if above.size else time[0])
 
 
 def convergence_table(

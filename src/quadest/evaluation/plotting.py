@@ -13,8 +13,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from quadest.evaluation.attitude_figures import plot_attitude_errors, plot_bias_estimates
-from quadest.evaluation.consistency import chi2_band
 from quadest.evaluation.pcrlb import pcrlb_is_bound
+from quadest.metrics.consistency import chi2_band
 from quadest.models.base import FilterModel
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult

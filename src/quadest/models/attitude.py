@@ -86,6 +86,16 @@ class AttitudeMetrics:
     def bias_states(self) -> tuple[str, ...]:
         return tuple(name for name in self.error_names if name.startswith(BIAS_PREFIXES))
 
+    @property
+    def state_groups(self) -> dict[str, tuple[str, ...]]:
+        """The attitude error, then each further quantity (position, velocity, gyro and accelerometer
+        bias: the error states sharing a unit) as its own group."""
+        names = {"rad": "attitude", "m": "position", "m/s": "velocity", "rad/s": "gyro_bias", "m/s^2": "accel_bias"}
+        groups: dict[str, tuple[str, ...]] = {}
+        for name, unit in zip(self.error_names, self.error_units, strict=True):
+            groups[names[unit]] = (*groups.get(names[unit], ()), name)
+        return groups
+
 
 class AttitudeFilterModel(AttitudeMetrics, FilterModel):
     """Quaternion attitude with gyro and accelerometer biases (see the module docstring).

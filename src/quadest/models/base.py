@@ -63,6 +63,10 @@ class MeasurementModel:
         return self.R.shape[0]
 
 
+UNIT_GROUPS = {"m/s": "velocities", "rad/s": "angle_rates", "rad": "angles", "m": "positions"}
+"""The default state groups (:attr:`FilterModel.state_groups`): error states of one unit."""
+
+
 class FilterModel(ABC):
     """Discrete-time model of a state-estimation problem, bound to a batch of runs.
 
@@ -169,6 +173,18 @@ class FilterModel(ABC):
         """Names of the error-state components (the RMSE and NEES rows); the state names for
         vector states."""
         return self.state_names
+
+    @property
+    def state_groups(self) -> dict[str, tuple[str, ...]]:
+        """Named groups of error states (``error_names``) that the tables judge together: the NEES
+        per group (:mod:`quadest.metrics.groups`) and the sweep's versus-best scores. By default
+        the error states that share a unit, named by :data:`UNIT_GROUPS` (``states`` for the
+        others); a model overrides it where its units do not say what belongs together."""
+        groups: dict[str, tuple[str, ...]] = {}
+        for name, unit in zip(self.error_names, self.error_units, strict=True):
+            group = UNIT_GROUPS.get(unit, "states")
+            groups[group] = (*groups.get(group, ()), name)
+        return groups
 
     @property
     def error_units(self) -> tuple[str, ...]:

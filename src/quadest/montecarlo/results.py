@@ -44,6 +44,8 @@ class EstimatorResult:
         flight: closed loop with the estimate fed back: what the job keeps of the flight this
             estimator flew (:class:`quadest.closed_loop.loop.FlightRecord`), cached with the
             result; ``None`` otherwise.
+        metric_values: what the streaming metrics (:mod:`quadest.metrics`) kept of the batch, by
+            name (their columns, or the per-step sums their tables are made from).
     """
 
     name: str
@@ -69,6 +71,7 @@ class EstimatorResult:
     derived_sq_error_sum: np.ndarray | None = None
     smoothed: EstimatorResult | None = None
     flight: object | None = None
+    metric_values: dict[str, np.ndarray] = field(default_factory=dict)
 
     def _per_run(self, totals: np.ndarray, root: bool = False) -> np.ndarray:
         """Time averages of per-run sums (square-rooted for RMSE); NaN for diverged runs."""
@@ -120,14 +123,14 @@ class EstimatorResult:
 def failed_result(name: str, data: MonteCarloData, reason: str) -> EstimatorResult:
     """The result of an estimator that could not run at all: every run flagged with ``reason``."""
     B, K1, n = data.truth.shape
-    nc = data.companion_truth.shape[-1]
+    n_err, nc = data.model.n_err, data.companion_truth.shape[-1]
     nan = np.full(B, np.nan)
     return EstimatorResult(
-        name=name, sq_error_sum=np.full((B, n), np.nan), companion_sq_error_sum=np.full((B, nc), np.nan),
+        name=name, sq_error_sum=np.full((B, n_err), np.nan), companion_sq_error_sum=np.full((B, nc), np.nan),
         steps=np.zeros(B), nees_sum=nan, nis_sum=nan.copy(), nees_mean_t=np.full(K1, np.nan),
-        nis_mean_t=np.full(K1, np.nan), sq_error_t=np.zeros((K1, n)), alive_t=np.zeros(K1),
+        nis_mean_t=np.full(K1, np.nan), sq_error_t=np.zeros((K1, n_err)), alive_t=np.zeros(K1),
         diverged=np.ones(B, dtype=bool), diverged_step=np.zeros(B, dtype=int), reasons=dict.fromkeys(range(B), reason),
         step_time_us=float("nan"), derived_sq_error_sum=np.full((B, len(data.model.derived_error_names)), np.nan),
-        saved={"estimate": np.full((0, K1, n), np.nan), "std": np.full((0, K1, n), np.nan),
+        saved={"estimate": np.full((0, K1, n), np.nan), "std": np.full((0, K1, n_err), np.nan),
                "companion": np.full((0, K1, nc), np.nan)},
     )  # fmt: skip

@@ -22,11 +22,18 @@ def chi2_band(dof: int, runs: np.ndarray | int, level: float = 0.95) -> tuple[np
         return chi2.ppf(tail, safe * dof) / safe, chi2.ppf(1.0 - tail, safe * dof) / safe
 
 
+MIN_SHARE_OF_STEPS = 0.5
+"""A band share is reported only when the statistic was available on at least this share of the
+steps 1..K: over fewer (every run diverged early) it would describe a few steps of a few runs, and
+"100 % in band" from one surviving step reads as a consistent filter. Otherwise NaN ("n/a")."""
+
+
 def fraction_inside(average_t: np.ndarray, dof: int, alive_t: np.ndarray) -> float:
     """Fraction of the time steps 1..K (with at least one live run) whose run-averaged statistic
-    lies inside its 95 % band; NaN when the statistic is not available."""
+    lies inside its 95 % band; NaN when the statistic is not available, or available on fewer than
+    :data:`MIN_SHARE_OF_STEPS` of the steps 1..K."""
     lo, hi = chi2_band(dof, alive_t)
     steps = (np.arange(average_t.size) > 0) & (alive_t > 0) & np.isfinite(average_t)
-    if not steps.any():
+    if steps.sum() < MIN_SHARE_OF_STEPS * (average_t.size - 1) or not steps.any():
         return float("nan")
     return float(np.mean((average_t[steps] >= lo[steps]) & (average_t[steps] <= hi[steps])))
