@@ -64,6 +64,8 @@ PARTICLE_KERNELS = "tests/test_particle_kernels.py::"
 STEPS = "tests/test_gaussian_steps.py::"
 SMOOTHERS = "tests/test_smoothers.py::"
 SMOOTHING_RUNS = "tests/test_smoothing_runs.py::"
+GAUSSIAN_FAMILY = "tests/test_gaussian_filter_family.py::"
+PENDULUM_BOOK = "tests/test_pendulum_book.py::"
 
 MUTATIONS = (
     Mutation(
@@ -619,6 +621,34 @@ MUTATIONS = (
             "tests/test_model_plugins.py::test_the_data_key_covers_a_model_plugins_source",
             "tests/test_sensor_plugins.py::test_the_data_key_covers_a_sensor_plugins_source",
         ),
+    ),
+    Mutation(
+        "an iterated update drops the prior's offset from the linearisation point",
+        "src/quadest/estimators/gaussian_filter.py",
+        "nu = meas.innovation(z, affine.mean) - (H @ model.boxminus(m_prior, m)[..., None])[..., 0]",
+        "nu = meas.innovation(z, affine.mean)",
+        (GAUSSIAN_FAMILY + "test_iekf_is_the_kalman_filter_on_a_linear_model",),
+    ),
+    Mutation(
+        "an iterated update conditions its last iterate instead of the prior",
+        "src/quadest/estimators/gaussian_filter.py",
+        "S = symmetric(H @ P_prior @ _t(H) + affine.noise)",
+        "S = symmetric(H @ P @ _t(H) + affine.noise)",
+        (GAUSSIAN_FAMILY + "test_iplf_is_the_kalman_filter_on_a_linear_model_with_any_rule",),
+    ),
+    Mutation(
+        "the measurement's residual ignored (a bearing not wrapped)",
+        "src/quadest/models/base.py",
+        "return z - predicted if self.residual is None else self.residual(z, predicted)",
+        "return z - predicted",
+        (GAUSSIAN_FAMILY + "test_a_wrapped_bearing_residual_is_honoured_near_pi",),
+    ),
+    Mutation(
+        "the iterated smoother linearises a step's measurement about the previous step",
+        "src/quadest/estimators/iterated_smoothing.py",
+        "linearisation.measurement(model, update.sensor, nominal_m[k], nominal_P[k], update.u, _factor)",
+        "linearisation.measurement(model, update.sensor, nominal_m[k - 1], nominal_P[k - 1], update.u, _factor)",
+        (PENDULUM_BOOK + "test_iterated_smoothers_reproduce_the_companions_published_rmse",),
     ),
 )  # fmt: skip
 
