@@ -18,7 +18,8 @@ import pytest
 from quadest.estimators.error_state_ekf import ErrorStateEKF
 from quadest.estimators.gaussian_filter import GaussianFilter
 from quadest.estimators.integrations import Integration, StatisticalLinearRegression, Taylor
-from quadest.estimators.iterated import IEKF, IPLF, RULES, integration_rule
+from quadest.estimators.iterated import IEKF, IPLF, RULES, IPLFParams, integration_rule
+from quadest.estimators.params import parameter_problem
 from quadest.estimators.registry import builtin_estimators
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter
 from quadest.estimators.smoothing import rts_backward
@@ -214,3 +215,12 @@ def test_gaussian_filter_takes_any_integration():
         GaussianFilter(model, Integration(StatisticalLinearRegression(integration_rule("cubature")))), x0, P0, u, z
     )
     assert np.array_equal(a, b) and not np.allclose(a, c)
+
+
+def test_a_gauss_hermite_grid_too_large_for_the_model_is_refused_before_any_work():
+    """``model=ins`` (15 error states) with the default 3 points per dimension would need 3^15
+    points: the pre-run check names the key; another rule passes."""
+    problem = parameter_problem(IPLFParams, {}, 15)
+    assert problem is not None and problem[0] == "p" and "3^15" in problem[2]
+    assert parameter_problem(IPLFParams, {"rule": "cubature"}, 15) is None
+    assert parameter_problem(IPLFParams, {}, 2) is None

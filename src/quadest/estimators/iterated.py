@@ -62,10 +62,19 @@ class IPLFParams:
 
     @staticmethod
     def constraints(values: Mapping[str, Any], n: int) -> list[tuple[str, Any, str]]:
-        """A known rule; the unscented rule's real points (``n + λ > 0``) when it is selected."""
-        if values.get("rule") not in RULES:
-            return [("rule", values.get("rule"), f"one of {list(RULES)}")]
-        return unscented_constraints(values, n) if values.get("rule") == "unscented" else []
+        """A known rule; the unscented rule's real points (``n + λ > 0``) when it is selected; a
+        Gauss–Hermite grid of at most its maximum number of points in the model's dimension."""
+        rule = values.get("rule")
+        if rule not in RULES:
+            return [("rule", rule, f"one of {list(RULES)}")]
+        if rule == "unscented":
+            return unscented_constraints(values, n)
+        if rule == "gauss_hermite" and n > 0:
+            grid = GaussHermiteRule(int(values.get("p", 3)))
+            if grid.p**n > grid.max_points:
+                why = f"p^n = {grid.p}^{n} points exceed {grid.max_points}; lower p or take rule: cubature"
+                return [("p", values.get("p", 3), why)]
+        return []
 
 
 def integration_rule(rule: str, p: int = 3, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0,
