@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from quadest.errors import ConfigError
 from quadest.estimators.error_state_ekf import ErrorStateEKF
 from quadest.estimators.gaussian_filter import GaussianFilter
 from quadest.estimators.integrations import Integration, StatisticalLinearRegression, Taylor
@@ -22,6 +23,7 @@ from quadest.estimators.iterated import IEKF, IPLF, RULES, IPLFParams, integrati
 from quadest.estimators.params import parameter_problem
 from quadest.estimators.registry import builtin_estimators
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter
+from quadest.estimators.smoother_settings import smoother_settings
 from quadest.estimators.smoothing import rts_backward
 from quadest.models.base import FilterModel
 from quadest.models.book_pendulum import BookPendulumModel
@@ -224,3 +226,15 @@ def test_a_gauss_hermite_grid_too_large_for_the_model_is_refused_before_any_work
     assert problem is not None and problem[0] == "p" and "3^15" in problem[2]
     assert parameter_problem(IPLFParams, {"rule": "cubature"}, 15) is None
     assert parameter_problem(IPLFParams, {}, 2) is None
+
+
+def test_the_iterated_smoother_is_refused_where_the_filter_cannot_give_it():
+    """``smoother: iterated`` needs a filter that re-linearises the whole run (``iekf``, ``iplf``):
+    a one-line error naming the key for the others, and for a count that is not >= 1."""
+    specs = builtin_estimators()
+    settings = smoother_settings("mine", {"smoother": "iterated", "smoother_iterations": 3}, specs["iplf"].cls)
+    assert (settings.kind, settings.iterations, settings.label_suffix) == ("iterated", 3, "+smoothed")
+    with pytest.raises(ConfigError, match=r"^estimator\.mine\.smoother='iterated' is invalid"):
+        smoother_settings("mine", {"smoother": "iterated"}, specs["ckf"].cls)
+    with pytest.raises(ConfigError, match=r"^estimator\.mine\.smoother_iterations=0 is invalid"):
+        smoother_settings("mine", {"smoother": "iterated", "smoother_iterations": 0}, specs["iekf"].cls)
