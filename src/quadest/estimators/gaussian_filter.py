@@ -70,7 +70,7 @@ class GaussianFilter(Estimator):
         flagged and gets the identity."""
         L, bad = batched_cholesky(A)
         if bad.any():
-            live = bad & ~self.failed if A.shape[0] == self.failed.shape[0] else bad
+            live = bad & ~self.failed
             if live.any():
                 self.flag(np.flatnonzero(live), f"{what} not positive definite")
             L[bad] = np.eye(A.shape[-1])
