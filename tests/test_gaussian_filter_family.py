@@ -220,12 +220,12 @@ def test_gaussian_filter_takes_any_integration():
 
 
 def test_a_gauss_hermite_grid_too_large_for_the_model_is_refused_before_any_work():
-    """``model=ins`` (15 error states) with the default 3 points per dimension would need 3^15
-    points: the pre-run check names the key; another rule passes."""
-    problem = parameter_problem(IPLFParams, {}, 15)
+    """``model=ins`` (15 error states) with Gauss–Hermite at 3 points per dimension would need
+    3^15 points: the pre-run check names the key; the default cubature rule passes."""
+    problem = parameter_problem(IPLFParams, {"rule": "gauss_hermite"}, 15)
     assert problem is not None and problem[0] == "p" and "3^15" in problem[2]
-    assert parameter_problem(IPLFParams, {"rule": "cubature"}, 15) is None
-    assert parameter_problem(IPLFParams, {}, 2) is None
+    assert parameter_problem(IPLFParams, {}, 15) is None  # the default rule, cubature, runs on every model
+    assert parameter_problem(IPLFParams, {"rule": "gauss_hermite"}, 2) is None
 
 
 def test_the_iterated_smoother_is_refused_where_the_filter_cannot_give_it():

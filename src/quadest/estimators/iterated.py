@@ -49,7 +49,7 @@ class IPLFParams:
     ``alpha``/``beta``/``kappa`` for the unscented rule, ``h`` for central differences)."""
 
     kind: str = "iplf"
-    rule: str = "gauss_hermite"
+    rule: str = "cubature"
     p: int = ranged(3, "Gauss-Hermite points per dimension (p^n in all)", ge=1, integer=True)
     alpha: float = ranged(1.0, "unscented rule: spread of the sigma points", gt=0.0)
     beta: float = ranged(0.0, "unscented rule: prior knowledge of the distribution (2: Gaussian)")
@@ -109,7 +109,7 @@ class IPLF(GaussianFilter):
     config_name = "iplf"
     Params = IPLFParams
 
-    def __init__(self, model: FilterModel, rule: str = "gauss_hermite", p: int = 3, alpha: float = 1.0,
+    def __init__(self, model: FilterModel, rule: str = "cubature", p: int = 3, alpha: float = 1.0,
                  beta: float = 0.0, kappa: float = 0.0, h: float = 3.0**0.5, iterations: int = 10,
                  tolerance: float = 0.0) -> None:  # fmt: skip
         linearisation = StatisticalLinearRegression(integration_rule(rule, p, alpha, beta, kappa, h))
