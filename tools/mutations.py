@@ -68,6 +68,8 @@ SEQUENTIAL = "tests/test_sequential.py::"
 SEQUENTIAL_RUNS = "tests/test_sequential_runs.py::"
 VISIBLE = "tests/test_failures_visible.py::"
 METRIC_PARTS = "tests/test_metric_parts.py::"
+GAUSSIAN_FAMILY = "tests/test_gaussian_filter_family.py::"
+PENDULUM_BOOK = "tests/test_pendulum_book.py::"
 
 MUTATIONS = (
     Mutation(
@@ -1045,6 +1047,34 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "return self.white_noise**2 + self.bias**2 + self.bias_random_walk**2",
         "return (self.white_noise + self.bias) ** 2 + self.bias_random_walk**2",
         (B_SENSORS + "test_the_barometer_r_adds_the_variances_of_its_noise_bias_and_drift_at_mid_run",),
+    ),
+    Mutation(
+        "an iterated update drops the prior's offset from the linearisation point",
+        "src/quadest/estimators/gaussian_filter.py",
+        "nu = meas.innovation(z, affine.mean) - (H @ model.boxminus(m_prior, m)[..., None])[..., 0]",
+        "nu = meas.innovation(z, affine.mean)",
+        (GAUSSIAN_FAMILY + "test_iekf_is_the_kalman_filter_on_a_linear_model",),
+    ),
+    Mutation(
+        "an iterated update conditions its last iterate instead of the prior",
+        "src/quadest/estimators/gaussian_filter.py",
+        "S = symmetric(H @ P_prior @ _t(H) + affine.noise)",
+        "S = symmetric(H @ P @ _t(H) + affine.noise)",
+        (GAUSSIAN_FAMILY + "test_iplf_is_the_kalman_filter_on_a_linear_model_with_any_rule",),
+    ),
+    Mutation(
+        "the measurement's residual ignored (a bearing not wrapped)",
+        "src/quadest/models/base.py",
+        "return z - predicted if self.residual is None else self.residual(z, predicted)",
+        "return z - predicted",
+        (GAUSSIAN_FAMILY + "test_a_wrapped_bearing_residual_is_honoured_near_pi",),
+    ),
+    Mutation(
+        "the iterated smoother linearises a step's measurement about the previous step",
+        "src/quadest/estimators/iterated_smoothing.py",
+        "linearisation.measurement(model, update.sensor, nominal_m[k], nominal_P[k], update.u, _factor)",
+        "linearisation.measurement(model, update.sensor, nominal_m[k - 1], nominal_P[k - 1], update.u, _factor)",
+        (PENDULUM_BOOK + "test_iterated_smoothers_reproduce_the_companions_published_rmse",),
     ),
 )  # fmt: skip
 

@@ -306,7 +306,7 @@ class SmoothingRecorder:
             return
         self.steps.append(self.est.smoother_step)
         self.means.append(self.est.mean.copy())
-        if self.settings.kind == "fixed_lag":
+        if self.settings.kind in ("fixed_lag", "iterated"):
             self.spreads.append(self._spread())
         else:
             self.spreads[-1:] = [self._spread()]  # only the last is needed
@@ -321,6 +321,11 @@ class SmoothingRecorder:
                 np.concatenate([self.spreads[0][None], covs]),
                 frozenset({"cloud"}),
             )
+        if self.settings.kind == "iterated":
+            means, covs = self.est.iterated_smoothing(
+                self.settings.iterations, np.array(self.means), np.array(self.spreads)
+            )
+            return means, covs, frozenset()
         form = self.est.smoothing_form()
         if self.settings.kind == "fixed_lag":
             means, spreads = fixed_lag(self.means, self.spreads, self.steps, form, self.settings.lag)

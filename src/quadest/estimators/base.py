@@ -24,6 +24,10 @@ Optional capabilities are declared in ``capabilities``, never guessed:
   leaves the smoother's step of its transition in ``smoother_step``
   (:class:`~quadest.estimators.smoothing.SmootherStep`) and ``smoothing_form()`` says how the
   steps combine (:mod:`quadest.estimators.smoothing`: fixed interval and fixed lag).
+- ``"iterated_smoothing"``: besides ``"smoothing"``, the estimator re-linearises the whole run
+  about its smoothed trajectory: ``iterated_smoothing(iterations, means, covariances)`` returns
+  the smoothed means and covariances of steps 0..K (the IERTS and IPLS,
+  :mod:`quadest.estimators.iterated_smoothing`).
 - ``"particle_smoothing"``: with :attr:`Estimator.smoothing` set, every ``update`` leaves its
   weighted cloud before resampling in ``smoother_cloud``
   (:class:`~quadest.estimators.particle_smoothing.ParticleCloud`) for the backward simulation.
@@ -52,7 +56,16 @@ from quadest.models.base import FilterModel
 from quadest.numerics.square_root import warm_up
 
 CAPABILITIES = frozenset(
-    {"innovation", "sqrt_covariance", "random", "cloud", "no_covariance", "smoothing", "particle_smoothing"}
+    {
+        "innovation",
+        "sqrt_covariance",
+        "random",
+        "cloud",
+        "no_covariance",
+        "smoothing",
+        "iterated_smoothing",
+        "particle_smoothing",
+    }
 )
 
 

@@ -17,7 +17,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-SMOOTHER_KEYS = ("smoother", "smoother_lag", "smoother_trajectories")  # quadest.estimators.smoother_settings
+SMOOTHER_KEYS = (
+    "smoother",
+    "smoother_lag",
+    "smoother_trajectories",
+    "smoother_iterations",
+)  # quadest.estimators.smoother_settings
 RESERVED_KEYS = ("kind", "_target_", *SMOOTHER_KEYS)  # config keys that are not constructor parameters
 
 

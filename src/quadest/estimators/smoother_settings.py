@@ -2,9 +2,12 @@
 
 ``estimator.<label>.smoother``: ``none`` (default), ``fixed_interval`` (the whole run: the RTS /
 unscented RTS smoother of a Gaussian filter, forward-filtering backward-simulation for a particle
-filter) or ``fixed_lag`` (Gaussian filters only: each state given the measurements up to
-``smoother_lag`` samples later). ``smoother_trajectories`` is the number of backward trajectories
-of the particle smoother (cost ``O(N · M)`` per step). The keys are reserved: they are not the
+filter), ``fixed_lag`` (Gaussian filters only: each state given the measurements up to
+``smoother_lag`` samples later) or ``iterated`` (the filters of
+:mod:`quadest.estimators.iterated`: the whole run re-linearised ``smoother_iterations`` times about
+its smoothed trajectory, started from the filter's output: the IERTS and the IPLS).
+``smoother_trajectories`` is the number of backward trajectories of the particle smoother (cost
+``O(N · M)`` per step). The keys are reserved: they are not the
 estimator's constructor parameters and not its parameter columns; the job reads them here.
 """
 
@@ -20,25 +23,28 @@ from typing import Any
 from quadest.errors import ConfigError
 from quadest.estimators.params import SMOOTHER_KEYS
 
-SMOOTHERS = ("none", "fixed_interval", "fixed_lag")
+SMOOTHERS = ("none", "fixed_interval", "fixed_lag", "iterated")
 DEFAULT_LAG = 10
 DEFAULT_TRAJECTORIES = 100
+DEFAULT_ITERATIONS = 10
 
 
 @dataclass(frozen=True)
 class SmootherSettings:
-    """A requested smoother: ``kind`` (``fixed_interval`` or ``fixed_lag``), the lag in samples and
-    the particle smoother's number of backward trajectories."""
+    """A requested smoother: ``kind`` (``fixed_interval``, ``fixed_lag`` or ``iterated``), the lag
+    in samples, the particle smoother's number of backward trajectories and the iterated
+    smoother's number of re-linearisations."""
 
     kind: str
     lag: int = DEFAULT_LAG
     trajectories: int = DEFAULT_TRAJECTORIES
+    iterations: int = DEFAULT_ITERATIONS
 
     @property
     def label_suffix(self) -> str:
         """What the smoothed row's name adds to the estimator's label: ``+smoothed`` for the
-        fixed interval, ``+lag<L>`` for a fixed lag."""
-        return "+smoothed" if self.kind == "fixed_interval" else f"+lag{self.lag}"
+        whole run (fixed interval or iterated), ``+lag<L>`` for a fixed lag."""
+        return f"+lag{self.lag}" if self.kind == "fixed_lag" else "+smoothed"
 
 
 def _count(key: str, value: Any) -> int:
@@ -64,6 +70,7 @@ def smoother_settings(label: str, node: Mapping[str, Any], cls: type) -> Smoothe
     trajectories = _count(
         f"estimator.{label}.smoother_trajectories", node.get("smoother_trajectories", DEFAULT_TRAJECTORIES)
     )
+    iterations = _count(f"estimator.{label}.smoother_iterations", node.get("smoother_iterations", DEFAULT_ITERATIONS))
     if kind == "none":
         return None
     capabilities = set(getattr(cls, "capabilities", frozenset()))
@@ -78,7 +85,13 @@ def smoother_settings(label: str, node: Mapping[str, Any], cls: type) -> Smoothe
         raise ConfigError(
             f"estimator.{label}.smoother", kind, "fixed_interval or none: a particle filter's smoother is FFBSi"
         )
-    return SmootherSettings(kind, lag, trajectories)
+    if kind == "iterated" and "iterated_smoothing" not in capabilities:
+        raise ConfigError(
+            f"estimator.{label}.smoother",
+            kind,
+            "none, fixed_interval or fixed_lag: only iekf and iplf re-linearise the whole run (docs/smoothers.md)",
+        )
+    return SmootherSettings(kind, lag, trajectories, iterations)
 
 
 _PREFIX = "SmootherSchema"
@@ -94,7 +107,9 @@ def with_smoother_keys(params: type) -> type:
         params.__name__,
         [
             (key, type(default), dataclasses.field(default=default))
-            for key, default in zip(SMOOTHER_KEYS, ("none", DEFAULT_LAG, DEFAULT_TRAJECTORIES), strict=True)
+            for key, default in zip(
+                SMOOTHER_KEYS, ("none", DEFAULT_LAG, DEFAULT_TRAJECTORIES, DEFAULT_ITERATIONS), strict=True
+            )
         ],
         bases=(params,),
     )

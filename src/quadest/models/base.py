@@ -57,10 +57,16 @@ class MeasurementModel:
     h: Callable[[np.ndarray, np.ndarray], np.ndarray]
     R: np.ndarray
     names: tuple[str, ...]
+    residual: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
     @property
     def m(self) -> int:
         return self.R.shape[0]
+
+    def innovation(self, z: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+        """``residual(z, ẑ)``: ``z − ẑ`` unless the measurement declares its own (a bearing
+        wrapped to (−π, π], filterpy's ``residual_z``)."""
+        return z - predicted if self.residual is None else self.residual(z, predicted)
 
 
 UNIT_GROUPS = {"m/s": "velocities", "rad/s": "angle_rates", "rad": "angles", "m": "positions"}
@@ -126,8 +132,19 @@ class FilterModel(ABC):
         """The primary measurement (``sensor=None``: ``h``, ``R``) or ``sensors[sensor]``, as one
         :class:`MeasurementModel`, so a filter updates with either the same way."""
         if sensor is None:
-            return MeasurementModel(self.h, self.R, tuple(self.measurement_names))
+            residual = (
+                None
+                if type(self).measurement_residual is FilterModel.measurement_residual
+                else self.measurement_residual
+            )
+            return MeasurementModel(self.h, self.R, tuple(self.measurement_names), residual)
         return self.sensors[sensor]
+
+    def measurement_residual(self, z: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+        """``z ⊟ ẑ`` of the primary measurement (..., m): ``z − ẑ`` unless a model overrides it
+        (a bearing: the difference wrapped to (−π, π]). The filters of
+        :mod:`quadest.estimators.gaussian_filter` condition on it."""
+        return z - predicted
 
     def measurement_jacobian(self, sensor: str | None, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Jacobian (B, m, n) of the primary measurement (:meth:`H`) or of a further sensor

@@ -218,3 +218,22 @@ class InsModelConf(QuadrotorFlightConf):
     magnetometer: MagnetometerConf = field(default_factory=MagnetometerConf)
     ins_process_noise: InsProcessNoiseConf = field(default_factory=InsProcessNoiseConf)
     ins_initial_std: InsInitialStdConf = field(default_factory=InsInitialStdConf)
+
+
+@dataclass
+class BookPendulumModelConf:
+    """``model=book_pendulum``: the noisy pendulum of Särkkä & Svensson (2023), Example 5.1
+    (:mod:`quadest.models.book_pendulum`). ``g``, ``q_c`` (spectral density of the process noise),
+    ``R`` (measurement-noise variance); every filter starts from ``m0`` with covariance
+    ``diag(P0)``; ``x0`` is the true initial state. ``recording``: null simulates the truth and
+    the measurements from the model; a file (JSON, CSV or NPZ, docs/models.md) replays its
+    recorded runs instead (a relative path is looked up in quadest's shipped ``data/`` first)."""
+
+    name: str = "book_pendulum"
+    g: float = 9.81
+    q_c: float = 0.01
+    R: float = 0.1
+    m0: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    P0: list[float] = field(default_factory=lambda: [1.0, 1.0])
+    x0: list[float] = field(default_factory=lambda: [1.5, 0.0])
+    recording: str | None = None

@@ -1,0 +1,187 @@
+"""Data from a file: recorded runs (time stamps, measurements, optionally the true states and the
+inputs) replayed as the Monte Carlo data of a job, so a filter comparison can run on data nobody
+simulated. Each recording is one run (``runs`` must equal their number); deterministic filters
+give the same numbers every time.
+
+Formats (docs/models.md), ``K`` samples per recording, the filters starting one sample period
+before the first (sample 0, whose truth is the model's known initial state or NaN):
+
+- **JSON**: an object with ``T`` (or ``time``), ``Y`` (``measurements``) and optionally ``X``
+  (``truth``) and ``U`` (``inputs``), or a list of such objects. Arrays may be stored either way
+  round (``(K, d)`` or ``(d, K)``, the layout of Särkkä & Svensson's companion files).
+- **CSV**: one recording; a header with ``time``, the measurement columns ``z:<name>``, and
+  optionally ``x:<name>`` and ``u:<name>``.
+- **NPZ**: arrays ``time`` (K,) or (R, K), ``measurements`` (R, K, m) or (K, m), and optionally
+  ``truth`` and ``inputs``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from quadest.config.settings import DataSettings
+from quadest.errors import ConfigError
+from quadest.models.base import FilterModel
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.streams import run_seed_sequences
+from quadest.simulation.validation_data import simulation_labels
+
+_PACKAGE = Path(__file__).resolve().parents[1]
+_ALIASES = {"time": ("time", "T", "t"), "measurements": ("measurements", "Y", "y", "z"),
+            "truth": ("truth", "X", "x"), "inputs": ("inputs", "U", "u")}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One recorded run: ``time`` (K,), ``measurements`` (K, m), ``truth`` (K, n) or ``None``,
+    ``inputs`` (K, nu) or ``None``."""
+
+    time: np.ndarray
+    measurements: np.ndarray
+    truth: np.ndarray | None = None
+    inputs: np.ndarray | None = None
+
+
+def resolve_recording(path: str) -> Path:
+    """``path`` as given when it exists; a relative path is looked up in quadest's shipped
+    ``data/`` folder first (the wheel's copy, then the repository's)."""
+    given = Path(path)
+    if not given.is_absolute():
+        for root in (_PACKAGE / "data", _PACKAGE.parents[1] / "data"):
+            if (root / given).is_file():
+                return root / given
+    if given.is_file():
+        return given
+    raise ConfigError("model.recording", path, "an existing JSON, CSV or NPZ file (relative: in quadest's data/)")
+
+
+def _rows(values, K: int | None, what: str) -> np.ndarray:
+    """``values`` as a (K, d) array: a vector becomes one column; (d, K) is transposed."""
+    a = np.asarray(values, dtype=float)
+    if a.ndim == 1:
+        return a[:, None]
+    if a.ndim != 2:
+        raise ValueError(f"{what} must be a vector or a matrix, got shape {a.shape}")
+    if K is not None and a.shape[0] != K and a.shape[1] == K:
+        return a.T
+    return a
+
+
+def _pick(record: dict, key: str):
+    for alias in _ALIASES[key]:
+        if alias in record:
+            return record[alias]
+    return None
+
+
+def _from_mapping(record: dict, where: str) -> Recording:
+    time, z = _pick(record, "time"), _pick(record, "measurements")
+    if time is None or z is None:
+        raise ValueError(f"{where}: a recording needs time stamps and measurements (keys T/time and Y/measurements)")
+    t = np.asarray(time, dtype=float).ravel()
+    K = t.size
+    truth, inputs = _pick(record, "truth"), _pick(record, "inputs")
+    return Recording(
+        t,
+        _rows(z, K, "measurements"),
+        None if truth is None else _rows(truth, K, "truth"),
+        None if inputs is None else _rows(inputs, K, "inputs"),
+    )
+
+
+def _read_csv(path: Path) -> list[Recording]:
+    with path.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows or "time" not in rows[0]:
+        raise ValueError(f"{path}: a CSV recording needs a header with 'time' and 'z:<name>' columns")
+    columns = list(rows[0])
+
+    def block(prefix: str) -> np.ndarray | None:
+        names = [c for c in columns if c.startswith(prefix)]
+        return np.array([[float(r[c]) for c in names] for r in rows]) if names else None
+
+    z = block("z:")
+    if z is None:
+        raise ValueError(f"{path}: a CSV recording needs measurement columns named 'z:<name>'")
+    return [Recording(np.array([float(r["time"]) for r in rows]), z, block("x:"), block("u:"))]
+
+
+def _read_npz(path: Path) -> list[Recording]:
+    with np.load(path) as npz:
+        arrays = {key: npz[key] for key in npz.files}
+    time = arrays.get("time")
+    if time is None or "measurements" not in arrays:
+        raise ValueError(f"{path}: an NPZ recording needs the arrays 'time' and 'measurements'")
+    if time.ndim == 1:
+        arrays = {key: value[None] for key, value in arrays.items()}
+    runs = arrays["time"].shape[0]
+    return [
+        Recording(*(arrays[key][r] if key in arrays else None for key in ("time", "measurements", "truth", "inputs")))
+        for r in range(runs)
+    ]
+
+
+def read_recordings(path: str | Path) -> list[Recording]:
+    """Every recording of a JSON, CSV or NPZ file (module docstring)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        content = json.loads(path.read_text())
+        records = content if isinstance(content, list) else [content]
+        return [_from_mapping(r, f"{path} [{i}]") for i, r in enumerate(records)]
+    if suffix == ".csv":
+        return _read_csv(path)
+    if suffix == ".npz":
+        return _read_npz(path)
+    raise ValueError(f"{path}: a recording is a .json, .csv or .npz file")
+
+
+def recorded_data(
+    settings: DataSettings,
+    model: FilterModel,
+    recordings: list[Recording],
+    x0_est: np.ndarray,
+    P0: np.ndarray,
+    initial_truth: np.ndarray | None = None,
+) -> MonteCarloData:
+    """The Monte Carlo data of ``recordings``, one run each: sample 0 (the filters' start, one
+    ``sample_period`` before the first time stamp; its truth ``initial_truth`` or NaN) and the
+    recorded samples 1..K. A recording without truth gets NaN truth (its errors are then NaN).
+
+    Raises:
+        ConfigError: ``runs`` is not the number of recordings, the recordings differ in length,
+            their time step is not ``sample_period``, or a measurement has not ``model.m`` components.
+    """
+    runs = int(settings.runs)
+    if runs != len(recordings):
+        raise ConfigError("runs", runs, f"{len(recordings)}: the number of recorded runs in the file")
+    K = recordings[0].time.size
+    if any(r.time.size != K for r in recordings):
+        raise ConfigError("model.recording", "runs of different lengths", "recordings of one length")
+    T = float(settings.sample_period)
+    steps = np.diff(np.concatenate([[recordings[0].time[0] - T], recordings[0].time]))
+    if not np.allclose(steps, T, rtol=1e-9, atol=0.0):
+        raise ConfigError("sample_period", T, f"the recording's time step ({steps.mean():.6g} s on average)")
+    if any(r.measurements.shape != (K, model.m) for r in recordings):
+        raise ConfigError("model.recording", "measurements", f"{model.m} component(s) per sample")
+    time = np.concatenate([[recordings[0].time[0] - T], recordings[0].time])
+    truth = np.full((runs, K + 1, model.n), np.nan)
+    z = np.zeros((runs, K + 1, model.m))
+    inputs = np.zeros((runs, K + 1, model.nu))
+    for i, r in enumerate(recordings):
+        if r.truth is not None:
+            truth[i, 1:] = r.truth
+        if initial_truth is not None:
+            truth[i, 0] = initial_truth
+        z[i, 1:] = r.measurements
+        if r.inputs is not None:
+            inputs[i, 1:] = r.inputs
+    seeds = run_seed_sequences(int(settings.seed), runs)["estimator"]
+    labels = simulation_labels(settings)
+    return MonteCarloData(model, time, truth, np.zeros((runs, K + 1, 0)), inputs, z, x0_est, P0,
+                          np.zeros((runs, 0)), seeds, labels)  # fmt: skip
