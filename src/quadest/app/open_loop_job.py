@@ -71,6 +71,8 @@ class OpenLoopJob:
     ) -> None:
         fig_dir.mkdir(exist_ok=True)
         ran = [r for r in results if r.saved["estimate"].shape[0]]
+        if not ran:  # every estimator failed to build: the failures are in summary.json, there is nothing to plot
+            return
         plot_truth_vs_estimate(data, ran, fig_dir / "truth_vs_estimate.png")
         if self.experiment.output.per_estimator_figures:
             for res in ran:

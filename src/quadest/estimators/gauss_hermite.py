@@ -4,6 +4,7 @@ the sigma-point filter with a tensor-product Gauss–Hermite rule of ``p`` point
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,6 +22,13 @@ class GaussHermiteParams(RobustParams):
     kind: str = "ghkf"
     p: int = ranged(3, "points per dimension (p^n points in all)", ge=1, integer=True)
     augmented: bool = False
+
+    @staticmethod
+    def constraints(values: Mapping[str, Any], n: int) -> list[tuple[str, Any, str]]:
+        """A grid of at most the rule's maximum number of points in the model's dimension ``n``
+        (checked before any work; an augmented filter's larger dimension is checked when it is built)."""
+        why = GaussHermiteRule(int(values.get("p", 3))).size_problem(n) if n > 0 else None
+        return [] if why is None else [("p", values.get("p", 3), f"{why} or use estimator=ckf")]
 
 
 class GHKF(SigmaPointKalmanFilter):

@@ -70,10 +70,9 @@ class IPLFParams:
         if rule == "unscented":
             return unscented_constraints(values, n)
         if rule == "gauss_hermite" and n > 0:
-            grid = GaussHermiteRule(int(values.get("p", 3)))
-            if grid.p**n > grid.max_points:
-                why = f"p^n = {grid.p}^{n} points exceed {grid.max_points}; lower p or take rule: cubature"
-                return [("p", values.get("p", 3), why)]
+            why = GaussHermiteRule(int(values.get("p", 3))).size_problem(n)
+            if why is not None:
+                return [("p", values.get("p", 3), f"{why} or take rule: cubature")]
         return []
 
 

@@ -35,7 +35,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from quadest.errors import DowndateError
+from quadest.errors import ConfigError, DowndateError
 from quadest.estimators.base import Estimator
 from quadest.estimators.gaussian_steps import (
     covariance_posterior,
@@ -86,7 +86,11 @@ class SigmaPointFilter(Estimator):
         self.sqrt_Q = psd_sqrt(model.Q, "Q")  # Sv = √Rv (5.14)
         self.sqrt_R = psd_sqrt(model.R, "R")  # Sn = √Rn (5.14)
         n, q, r = model.n_err, model.process_noise_dim, model.measurement_noise_dim
-        rule.validate(n + q + r if augmented else n)
+        dim = n + q + r if augmented else n
+        try:
+            rule.validate(dim)
+        except ValueError as exc:  # a configuration the rule cannot serve: the job fails, no run "diverges"
+            raise ConfigError(f"{type(self).config_name}.rule", rule.name, f"{exc} (dimension {dim})") from None
         self._sensor_cache: dict[str, np.ndarray] = {}
 
     # --- the form: how the second moment (its "spread": covariance or factor) is kept ---

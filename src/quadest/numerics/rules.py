@@ -284,8 +284,15 @@ class GaussHermiteRule(IntegrationRule):
     def validate(self, n: int) -> None:
         if not (isinstance(self.p, int | np.integer) and self.p >= 1):
             raise ValueError(f"p must be an integer >= 1, got {self.p}")
+        problem = self.size_problem(n)
+        if problem is not None:
+            raise ValueError(problem)
+
+    def size_problem(self, n: int) -> str | None:
+        """Why the grid is too large in dimension ``n`` (``p^n`` points over :attr:`max_points`), or None."""
         if self.p**n > self.max_points:
-            raise ValueError(f"p^n = {self.p}^{n} points exceed {self.max_points}; lower p")
+            return f"p^n = {self.p}^{n} points exceed {self.max_points}; lower p"
+        return None
 
     def unit_points(self, n: int) -> np.ndarray:
         return _gauss_hermite(n, self.p)[0]
