@@ -111,7 +111,7 @@ GAINS = np.tile([1.0, 0.0, 0.0, 2.0, 0.0, 0.5, 0.0, 0.0, 0.0, 3.0], 20)
 
 def test_the_measurement_at_step_k_is_read_with_the_input_of_step_k():
     """``H_k = [u_k, 0]`` changes from step to step: the bound equals the Riccati recursion with
-    ``H`` at each step's own input (issue 36 §6); reading it with ``u_{k−1}`` would not."""
+    ``H`` at each step's own input; reading it with ``u_{k−1}`` would not."""
     d = input_measured_data(GAINS)
     m = d.model
     expected = riccati(m.A, m.Q, d.P0, [np.array([[u, 0.0]]) for u in GAINS], m.R)
