@@ -51,6 +51,7 @@ class Mutation:
 GAPS = "tests/test_science_gaps.py::"
 NONLINEAR = "tests/test_conformance_nonlinear.py::"
 VALIDATION = "tests/test_validation_models.py::"
+PCRLB = "tests/test_pcrlb.py::"
 IDENTITIES = "tests/test_srukf_identities.py::"
 RULES = "tests/test_rules.py::"
 FAMILY = "tests/test_sigma_point_family.py::"
@@ -192,8 +193,8 @@ MUTATIONS = (
     Mutation(
         "PCRLB 25 % too high (filters would 'beat' a true bound)",
         "src/quadest/evaluation/pcrlb.py",
-        "out[k] = np.diag(np.linalg.inv(J))",
-        "out[k] = 1.25 * np.diag(np.linalg.inv(J))",
+        "out[k] = np.diag(P)",
+        "out[k] = 1.25 * np.diag(P)",
         (VALIDATION + "test_no_filter_beats_the_pcrlb[linear-100]",),
     ),
     Mutation(
@@ -202,6 +203,41 @@ MUTATIONS = (
         "return spec is not None and spec.pcrlb_is_bound",
         "return True",
         (VALIDATION + "test_pcrlb_is_called_a_bound_only_where_it_is_one",),
+    ),
+    Mutation(
+        "PCRLB measurement information read with the previous step's input",
+        "src/quadest/evaluation/pcrlb.py",
+        "H = model.H_err(data.truth[:, k], u_now, sensor)",
+        "H = model.H_err(data.truth[:, k], u_prev, sensor)",
+        (PCRLB + "test_the_measurement_at_step_k_is_read_with_the_input_of_step_k",),
+    ),
+    Mutation(
+        "PCRLB without the Jacobians' spread over the runs (E[F]ᵀQ⁻¹E[F] for E[FᵀQ⁻¹F])",
+        "src/quadest/evaluation/pcrlb.py",
+        "prior = add_information(P, (spread_t @ Q_range_inverse @ spread).mean(axis=0))",
+        "prior = P",
+        (PCRLB + "test_the_covariance_form_is_tichavskys_information_recursion_on_the_ungm",),
+    ),
+    Mutation(
+        "PCRLB ignoring the P0 it is given",
+        "src/quadest/evaluation/pcrlb.py",
+        "P0 = data.P0 if P0 is None else P0",
+        "P0 = data.P0",
+        (PCRLB + "test_the_bound_grows_with_the_initial_covariance",),
+    ),
+    Mutation(
+        "PCRLB information added without the Joseph form's K Kᵀ",
+        "src/quadest/evaluation/pcrlb.py",
+        "out = A @ P @ A.T + K @ K.T",
+        "out = A @ P @ A.T",
+        (PCRLB + "test_with_a_rank_deficient_Q_the_bound_is_the_kalman_covariance",),
+    ),
+    Mutation(
+        "a PCRLB cell without a number printed as a bare '-'",
+        "src/quadest/evaluation/metrics.py",
+        'return "left out (caption)" if left_out else "invalid: negative or non-finite variance"',
+        'return "-"',
+        (PCRLB + "test_a_pcrlb_cell_without_a_number_says_why",),
     ),
     Mutation(
         "W0(c) taken from the mean weights",

@@ -194,9 +194,24 @@ def floor_table(results: list[EstimatorResult], data: MonteCarloData, bound: np.
     return pd.DataFrame(rows)
 
 
+NOT_A_STATE = {"derived": "derived quantity", "companion": "companion value"}
+
+
+def bound_cell(quantity: str, floor: float, left_out: bool) -> str:
+    """The PCRLB cell of the printed table: the floor, or why there is none (a row that is not a
+    filter state, named by its quantity; a bound the job left out, its caption says why; a variance that is negative or
+    not finite, which the covariance-form recursion of :mod:`quadest.evaluation.pcrlb` does not
+    produce beyond round-off, and which is flagged, not hidden)."""
+    if quantity != "filter":
+        return f"n/a: {NOT_A_STATE.get(quantity, quantity)}"
+    if np.isfinite(floor):
+        return f"{floor:.4g}"
+    return "left out (caption)" if left_out else "invalid: negative or non-finite variance"
+
+
 def rmse_table(summary: pd.DataFrame) -> pd.DataFrame:
     """The printed table: one row per state, one column per estimator, ``mean ± std``, and the
-    PCRLB floor of each filter state."""
+    PCRLB floor of each filter state (:func:`bound_cell`)."""
     text = summary.assign(
         cell=[
             "diverged" if np.isnan(m) else f"{m:.4g} ± {s:.2g}"
@@ -207,8 +222,9 @@ def rmse_table(summary: pd.DataFrame) -> pd.DataFrame:
     wide = text.pivot_table(index=["quantity", "row"], columns="estimator", values="cell", aggfunc="first", sort=False)
     wide.columns.name = None
     if "pcrlb" in summary:
-        floors = text.drop_duplicates("row").set_index(["quantity", "row"])["pcrlb"]
-        wide["PCRLB"] = [f"{v:.4g}" if np.isfinite(v) else "-" for v in floors.reindex(wide.index)]
+        floors = text.drop_duplicates("row").set_index(["quantity", "row"])["pcrlb"].reindex(wide.index)
+        left_out = not np.isfinite(floors[wide.index.get_level_values("quantity") == "filter"]).any()
+        wide["PCRLB"] = [bound_cell(quantity, value, left_out) for (quantity, _), value in floors.items()]
     return wide.reset_index().drop(columns="quantity").rename(columns={"row": "state"})
 
 

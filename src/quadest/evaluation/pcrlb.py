@@ -25,11 +25,36 @@ runs of 3 s). It is reported as a reference for the filter model, and every tabl
 so (:func:`pcrlb_caption`). A bound for the quadrotor would need the Fisher information of the
 true system (deterministic dynamics, per-run sensor errors), which quadest does not compute.
 
-Singular or nearly singular Q (condition number above 1e12): ``Q⁻¹`` is formed from ``Q + δ I``
-with ``δ = 1e-12 · max(diag Q)`` (documented regularisation). A well-conditioned Q, as in every
-shipped model, is inverted exactly. The information form loses about cond(Q)·eps: on the
-constant-velocity model it matches the Kalman covariance to ~1e-13 at T = 0.1 s (cond(Q) ≈ 1e3)
-and to ~1e-9 at T = 0.01 s (cond(Q) ≈ 1e5).
+Evaluation: the covariance form. Write ``D11 = F̄ᵀ Q⁻¹ F̄ + C`` with ``F̄ = E[F]`` and
+``C = E[(F − F̄)ᵀ Q⁻¹ (F − F̄)]`` (the Jacobians' spread over the runs). The matrix inversion
+lemma turns the recursion above into
+
+    P̃ = (P_{k−1}⁻¹ + C)⁻¹,   P⁻ = F̄ P̃ F̄ᵀ + Q,   P_k = J_k⁻¹ = (P⁻⁻¹ + E[Hᵀ R⁻¹ H])⁻¹
+
+the same numbers (to round-off) wherever ``Q`` is invertible, and with a deterministic ``F`` (a
+linear model) exactly the Kalman filter's Riccati recursion. Both information additions are done
+as Joseph-form updates with a pseudo-measurement ``Lᵀ x``, ``L Lᵀ`` the information
+(:func:`add_information`), so nothing but the measurement noise ``R`` is inverted, and every
+``P_k`` is symmetric positive semi-definite to round-off. ``Q`` enters ``P⁻`` as it is, so a
+singular ``Q`` (``model=ins``: one acceleration noise drives position and velocity and constant
+biases have none, rank 6 of 15 in seed 004's setting) is handled exactly; ``C`` uses ``Q⁺``, the
+inverse on ``Q``'s range. The spread outside that range is not counted: it would be infinite
+information (the transition has no density there). On ``model=ins`` the spread lies in the range
+(the Jacobians vary through the IMU samples and scale factors, which enter as the noise does),
+which ``tests/test_pcrlb.py`` checks. ``R`` is inverted exactly when its condition number is at
+most 1e12 and from ``R + δ I``, ``δ = 1e-12 · max(diag R)``, otherwise (a nearly exact
+measurement).
+
+Averaging: one recursion on expectations over the runs (in Tichavský et al. 1998 the D's are
+expectations over the joint density of states and measurements), not the mean of per-run
+recursions. With
+Jacobians that differ from run to run (UNGM's state, the INS's IMU samples and per-run scale
+factors), ``C`` is information the averaged recursion has and no single run has: the bound stays a
+bound where the truth follows the filter model (it is the Bayesian information of the ensemble,
+Van Trees 1968), but it is looser than the mean of the per-run Riccati covariances and can shrink
+at a step without a measurement. On seed 004's landing the gyro noise is tiny (``Q`` of the
+attitude 8.5e-12 rad² per step), so this spread makes the y and z position bounds a sixth to a quarter
+of what the mean Jacobian alone gives (docs/ins.md).
 """
 
 from __future__ import annotations
@@ -39,7 +64,7 @@ import numpy as np
 from quadest.montecarlo import MonteCarloData
 from quadest.simulation.registry import model_specs
 
-REGULARISATION = 1e-12
+REGULARISATION = 1e-12  # of R only (module docstring)
 
 
 def pcrlb_is_bound(model_name: str) -> bool:
@@ -83,35 +108,72 @@ def _inverse_noise(M: np.ndarray) -> np.ndarray:
     return np.linalg.inv(M + delta * np.eye(M.shape[0]))
 
 
+def _eigen_range(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues and eigenvectors of the symmetric positive semi-definite ``M`` on its range, the
+    rank decided as :func:`numpy.linalg.matrix_rank` decides it (eigenvalues above
+    ``λ_max · n · eps``; the rest are round-off)."""
+    w, V = np.linalg.eigh(0.5 * (M + M.T))
+    kept = w > max(float(w.max()), 0.0) * M.shape[0] * np.finfo(float).eps
+    return w[kept], V[:, kept]
+
+
+def range_inverse(Q: np.ndarray) -> np.ndarray:
+    """``Q⁺``: the inverse of ``Q`` on its range (``Q⁻¹`` for a non-singular ``Q``)."""
+    w, V = _eigen_range(Q)
+    return (V / w) @ V.T
+
+
+def _factor(info: np.ndarray) -> np.ndarray:
+    """``L`` (n, r) with ``L Lᵀ = info`` on the range of ``info`` (:func:`_eigen_range`)."""
+    w, V = _eigen_range(info)
+    return V * np.sqrt(w)
+
+
+def add_information(P: np.ndarray, info: np.ndarray) -> np.ndarray:
+    """``(P⁻¹ + info)⁻¹`` without inverting ``P``: a Kalman update with the pseudo-measurement
+    ``Lᵀ x`` of unit noise (``L Lᵀ = info``), in Joseph form (Bucy & Joseph 1968), so the result
+    is symmetric positive semi-definite to round-off whatever the conditioning of ``P``."""
+    L = _factor(info)
+    if L.shape[1] == 0:
+        return P
+    PL = P @ L
+    K = np.linalg.solve(np.eye(L.shape[1]) + L.T @ PL, PL.T).T
+    A = np.eye(P.shape[0]) - K @ L.T
+    out = A @ P @ A.T + K @ K.T
+    return 0.5 * (out + out.T)
+
+
 def pcrlb_variances(data: MonteCarloData, P0: np.ndarray | None = None) -> np.ndarray:
     """``diag(J_k⁻¹)`` for k = 0..K (K+1, n), with expectations over the runs of ``data``.
 
     ``P0`` defaults to ``data.P0``. Uses the model's analytic Jacobians where it has them and
-    central differences otherwise; inputs carry the *true* companion values (thesis angles).
+    central differences otherwise; inputs carry the *true* companion values (thesis angles). The
+    recursion is the module docstring's covariance form: ``Q`` is never inverted off its range.
     """
     model = data.model
     K1, n = data.truth.shape[1], model.n_err
     P0 = data.P0 if P0 is None else P0
-    Qi = _inverse_noise(model.Q)
+    Q_range_inverse = range_inverse(model.Q)
     measured = [(None, _inverse_noise(model.R) if model.m else None, np.ones(K1, dtype=bool))]
     measured += [(name, _inverse_noise(model.measurement(name).R), rec.available) for name, rec in data.sensors.items()]
-    J = np.linalg.inv(P0)
+    P = np.array(P0, dtype=float)
     out = np.empty((K1, n))
-    out[0] = np.diag(P0)
+    out[0] = np.diag(P)
     u_prev = model.filter_input(data.inputs[:, 0], data.companion_truth[:, 0])
     for k in range(1, K1):
         u_now = model.filter_input(data.inputs[:, k], data.companion_truth[:, k])
         F = model.F_err(data.truth[:, k - 1], u_prev)  # = F, H for vector states
-        Ft = np.swapaxes(F, -1, -2)
-        D11 = (Ft @ Qi @ F).mean(axis=0)
-        D12 = -Ft.mean(axis=0) @ Qi
-        D22 = Qi.copy()
+        F_mean = F.mean(axis=0)
+        spread = F - F_mean
+        spread_t = np.swapaxes(spread, -1, -2)
+        prior = add_information(P, (spread_t @ Q_range_inverse @ spread).mean(axis=0))
+        P = F_mean @ prior @ F_mean.T + model.Q
+        info = np.zeros((n, n))
         for sensor, Ri, available in measured:
             if Ri is not None and available[k]:
                 H = model.H_err(data.truth[:, k], u_now, sensor)
-                D22 += (np.swapaxes(H, -1, -2) @ Ri @ H).mean(axis=0)
-        J = D22 - D12.T @ np.linalg.solve(J + D11, D12)
-        J = 0.5 * (J + J.T)
-        out[k] = np.diag(np.linalg.inv(J))
+                info += (np.swapaxes(H, -1, -2) @ Ri @ H).mean(axis=0)
+        P = add_information(0.5 * (P + P.T), info)
+        out[k] = np.diag(P)
         u_prev = u_now
     return out
