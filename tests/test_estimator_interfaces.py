@@ -152,6 +152,21 @@ def test_per_run_adapter_flags_a_run_whose_mean_stops_being_finite_without_raisi
     assert not np.array_equal(means[-1][0], means[1][0])  # run 0 goes on
 
 
+def test_per_run_adapter_lets_a_configuration_error_fail_the_job():
+    """A single-run plugin that refuses its configuration while it runs raises ``ConfigError``
+    out of the adapter (the job fails with its one line), rather than flagging every run diverged."""
+    data = build_data(compose_settings([*LINEAR, "runs=2"]))
+
+    class Refuses(FilterpyUKF):
+        def predict(self, u):
+            raise ConfigError("estimator.single.gain", 2.0, "must be < 1")
+
+    adapter = PerRunAdapter(data.model, Refuses)
+    adapter.initialize(data.x0, np.broadcast_to(data.P0, (2, *data.P0.shape[-2:])).copy())
+    with pytest.raises(ConfigError, match=r"estimator\.single\.gain"):
+        adapter.predict(data.inputs[:, 0])
+
+
 # --- 2. noise as distributions -----------------------------------------------------------------
 
 

@@ -854,6 +854,27 @@ MUTATIONS = (
         'return _git("rev-parse", "HEAD") is not None',
         ("tests/test_provenance.py::test_a_non_editable_install_reports_its_build_record_and_says_so",),
     ),
+    Mutation(
+        "a single-run plugin's configuration error marks its runs diverged",
+        "src/quadest/estimators/base.py",
+        "            except ConfigError:  # a configuration the plugin refuses fails the job",
+        "            except ZeroDivisionError:  # a configuration the plugin refuses fails the job",
+        ("tests/test_estimator_interfaces.py::test_per_run_adapter_lets_a_configuration_error_fail_the_job",),
+    ),
+    Mutation(
+        "a Gauss-Hermite grid too large for the state passes validation",
+        "src/quadest/estimators/gauss_hermite.py",
+        "        return [] if why is None else",
+        "        return [] if True else",
+        ("tests/test_gauss_hermite_grid.py::test_a_grid_too_large_for_the_state_is_refused_before_any_work",),
+    ),
+    Mutation(
+        "a sigma-point rule the augmented dimension rules out marks every run diverged",
+        "src/quadest/estimators/sigma_point.py",
+        '            raise ConfigError(f"{type(self).config_name}.rule", rule.name, f"{exc} (dimension {dim})") from None',
+        "            raise",
+        ("tests/test_gauss_hermite_grid.py::test_a_grid_too_large_only_when_augmented_fails_the_job",),
+    ),
 )  # fmt: skip
 
 B_SMOOTHING = "tests/test_behaviours_smoothing.py::"

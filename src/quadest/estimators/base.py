@@ -276,6 +276,8 @@ class PerRunAdapter(Estimator):
                 call(i, filt)
                 self._mean[i], self._cov[i] = filt.mean, filt.covariance
                 stepped.append(i)
+            except ConfigError:  # a configuration the plugin refuses fails the job (docs/usage.md), no run "diverges"
+                raise
             except Exception as exc:  # a plugin's failure marks its run, never the job
                 reason = exc.reason if isinstance(exc, FilterDivergence) else f"{type(exc).__name__}: {exc}"
                 self._mean[i], self._cov[i] = previous[0][i], previous[1][i]
