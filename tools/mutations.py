@@ -692,6 +692,13 @@ MUTATIONS = (
         "",
         (SEQUENTIAL + "test_the_job_stops_at_the_first_look_where_every_comparison_is_decided",),
     ),
+    Mutation(
+        "rise time from the first sample past each level, not interpolated",
+        "src/quadest/closed_loop/control_metrics.py",
+        "crossing = t[prev] + frac * (t[k] - t[prev])",
+        "crossing = t[k] + 0 * frac",
+        ("tests/test_closed_loop.py::test_rise_time_matches_hand_computed_responses",),
+    ),
 )  # fmt: skip
 
 
