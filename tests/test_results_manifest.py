@@ -10,7 +10,7 @@ import subprocess
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-BUDGET_BYTES = 30_000_000  # results/README.md: results/ at most 30 MB (10^6 bytes) in git
+BUDGET_BYTES = 32_500_000  # results/README.md: results/ at most 32.5 MB (10^6 bytes) in git (issue 31)
 
 
 def load_tool():
@@ -51,7 +51,7 @@ def test_every_folder_is_described_in_results_readme():
 
 def test_results_keep_to_their_size_budget():
     size = sum(path.stat().st_size for path in tracked_results() if path.is_file())
-    assert size <= BUDGET_BYTES, f"results/ holds {size / 1e6:.1f} MB in git; the budget is 30 MB"
+    assert size <= BUDGET_BYTES, f"results/ holds {size / 1e6:.1f} MB in git; the budget is 32.5 MB"
 
 
 def test_list_runs_nothing(capsys):
