@@ -270,6 +270,25 @@ def test_step_metrics_match_a_second_order_response(zeta, wn):
     assert got["steady_state_error_pct"][2] == pytest.approx(0.5, abs=tol + 100 * 0.01 * dt)
 
 
+def test_rise_time_matches_hand_computed_responses():
+    """10-90 % rise time: a first-order lag 1 - exp(-t/tau) crosses level l at -tau ln(1 - l), so its
+    rise time is tau ln 9 exactly; a ramp t / T sampled coarsely (the levels between samples) rises in
+    0.8 T, which linear interpolation between samples gives to round-off; a response that never
+    reaches 90 % has none."""
+    tau, T, t0, dt = 0.3, 1.0, 2.0, 1e-3
+    time = np.arange(0, 6.0, dt)
+    lag = 1 - np.exp(-np.clip(time - t0, 0, None) / tau)
+    event = StepEvent(t0, 0, 0.0, 1.0, 6.0)
+    got = step_response(time, np.stack([lag, 0.85 * lag]), event, band=0.02, steady_window=1.0)
+    # linear interpolation errs by at most max|r''| dt^2 / 8 in r, i.e. dt^2 / (8 tau) e^(dt/tau) in time
+    assert got["rise_time_s"][0] == pytest.approx(tau * np.log(9), abs=dt**2 / tau)
+    assert np.isnan(got["rise_time_s"][1])
+    coarse = np.arange(0, 6.0, 0.07)
+    ramp = np.clip((coarse - t0) / T, 0, 1)
+    got = step_response(coarse, ramp[None, :], event, band=0.02, steady_window=1.0)
+    assert got["rise_time_s"][0] == pytest.approx(0.8 * T, abs=1e-12)
+
+
 def test_step_events_follow_the_scenario():
     events = step_events([[5.0, 0, 4.0], [10.0, 1, 4.0], [30.0, 0, 0.0], [40.0, 1, 0.0]], 35.0)
     assert [(e.time, e.axis, e.end_time) for e in events] == [(5.0, 0, 30.0), (10.0, 1, 35.0), (30.0, 0, 35.0)]

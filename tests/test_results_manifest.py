@@ -10,7 +10,7 @@ import subprocess
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-BUDGET_BYTES = 30_100_000  # results/README.md: at most 30.1 MB (10^6 bytes) in git, raised for the runs=auto tables
+BUDGET_BYTES = 32_500_000  # results/README.md: at most 32.5 MB (10^6 bytes) in git, raised for the ledger's evidence
 
 
 def load_tool():

@@ -1133,6 +1133,13 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "linearisation.measurement(model, update.sensor, nominal_m[k - 1], nominal_P[k - 1], update.u, _factor)",
         (PENDULUM_BOOK + "test_iterated_smoothers_reproduce_the_companions_published_rmse",),
     ),
+    Mutation(
+        "rise time from the first sample past each level, not interpolated",
+        "src/quadest/closed_loop/control_metrics.py",
+        "crossing = t[prev] + frac * (t[k] - t[prev])",
+        "crossing = t[k] + 0 * frac",
+        ("tests/test_closed_loop.py::test_rise_time_matches_hand_computed_responses",),
+    ),
 )  # fmt: skip
 
 

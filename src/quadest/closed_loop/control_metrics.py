@@ -17,7 +17,11 @@ Engineering*, 5th ed., §5-3, transient-response specifications):
   end of the transient window (``band`` = 2 %; without a transient window, to the end of the
   interval); NaN when the response is outside the band at the window's last sample (not settled);
 - steady-state error (%): ``100 · |mean r − 1|`` over the last ``steady_window`` seconds of the
-  window.
+  window;
+- rise time (s): the 10–90 % rise time (Ogata §5-3, ``t_r`` for overdamped responses), from the
+  first time ``r`` reaches 0.1 to the first time it reaches 0.9 within the transient window, each
+  crossing interpolated linearly between the two samples around it; NaN when ``r`` never reaches 0.9
+  there.
 
 Tracking RMSE per channel over the whole run: roll, pitch, yaw and altitude in attitude mode,
 x, y, altitude and yaw in position mode. Control effort: RMS over time of the commanded rotor
@@ -69,6 +73,24 @@ def step_events(steps: list[list[float]], duration: float) -> list[StepEvent]:
     return events
 
 
+RISE_LEVELS = (0.1, 0.9)
+"""The fractions of the step between which the rise time is measured (10–90 %)."""
+
+
+def first_crossing(t: np.ndarray, r: np.ndarray, level: float) -> np.ndarray:
+    """Per row of ``r`` (B, K) sampled at ``t`` (K,): the first time ``r`` reaches ``level``,
+    interpolated linearly between the last sample below it and the first at or above it (``t[0]``
+    when the first sample already is); NaN when no sample reaches it."""
+    reached = r >= level
+    k = np.argmax(reached, axis=1)
+    prev = np.maximum(k - 1, 0)
+    rows = np.arange(r.shape[0])
+    r0, r1 = r[rows, prev], r[rows, k]
+    frac = np.where(k > 0, (level - r0) / np.where(r1 > r0, r1 - r0, 1.0), 0.0)
+    crossing = t[prev] + frac * (t[k] - t[prev])
+    return np.where(reached.any(axis=1), crossing, np.nan)
+
+
 def step_response(
     time: np.ndarray,
     y: np.ndarray,
@@ -77,8 +99,8 @@ def step_response(
     steady_window: float,
     transient_window: float | None = None,
 ) -> dict[str, np.ndarray]:
-    """Overshoot (%), settling time (s) and steady-state error (%) of the responses ``y`` (B, K+1)
-    sampled at ``time`` (K+1,) to ``event``, and with a ``transient_window`` (s) the peak error
+    """Overshoot (%), settling time (s), steady-state error (%) and 10–90 % rise time (s) of the
+    responses ``y`` (B, K+1) sampled at ``time`` (K+1,) to ``event``, and with a ``transient_window`` (s) the peak error
     after it (see the module docstring)."""
     window = (time >= event.time) & (time < event.end_time)
     t = time[window]
@@ -94,7 +116,9 @@ def step_response(
     settling = np.where(settled, settling, np.nan)
     tail = t >= event.end_time - steady_window
     steady = 100.0 * np.abs(r[:, tail].mean(axis=1) - 1.0)
-    out = {"overshoot_pct": overshoot, "settling_time_s": settling, "steady_state_error_pct": steady}
+    low, high = (first_crossing(ts, r[:, transient], level) for level in RISE_LEVELS)
+    out = {"overshoot_pct": overshoot, "settling_time_s": settling, "steady_state_error_pct": steady,
+           "rise_time_s": high - low}  # fmt: skip
     if transient_window is not None:
         late = np.abs(r[:, ~transient] - 1.0).max(axis=1, initial=-np.inf)
         out["peak_error_pct"] = np.where(np.isfinite(late), 100.0 * late, np.nan)  # NaN: the interval ends first
