@@ -66,6 +66,7 @@ SMOOTHERS = "tests/test_smoothers.py::"
 SMOOTHING_RUNS = "tests/test_smoothing_runs.py::"
 SEQUENTIAL = "tests/test_sequential.py::"
 SEQUENTIAL_RUNS = "tests/test_sequential_runs.py::"
+FAST_PF = "tests/test_particle_fast_mode.py::"
 
 MUTATIONS = (
     Mutation(
@@ -691,6 +692,20 @@ MUTATIONS = (
         "        if decisions.settled:\n            break\n",
         "",
         (SEQUENTIAL + "test_the_job_stops_at_the_first_look_where_every_comparison_is_decided",),
+    ),
+    Mutation(
+        "fast bootstrap step's log-likelihood with half its exponent",
+        "src/quadest/numerics/particle_kernels.py",
+        "            value = log_norm - 0.5 * maha\n",
+        "            value = log_norm - 0.25 * maha\n",
+        (FAST_PF + "test_fast_step_kernels_give_the_reference_numbers_to_round_off[False-True-True-stratified]",),
+    ),
+    Mutation(
+        "fast mode keeps the weights of the resampled cloud",
+        "src/quadest/estimators/particle.py",
+        "self.logw = np.full_like(out.w, self._log_uniform)",
+        "self.logw = np.log(out.w)",
+        (FAST_PF + "test_fast_mode_rmse_agrees_with_exact_mode_within_monte_carlo_error[numba]",),
     ),
 )  # fmt: skip
 
