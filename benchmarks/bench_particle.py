@@ -29,10 +29,11 @@ filters' kernels are loaded (or compiled) before any timing:
 
    Without it the script prints a note and skips this column.
 
-Items 1, 2 and 5 are CPU time of the filtering process (``time.process_time``), the same as wall
-time for this single-threaded code on an idle machine and less sensitive to other processes on a
-shared one; the ratios are measured in the same run, so load that remains (caches, memory
-bandwidth) acts on both sides. The runner's time (3) and the compile times (4) are wall time.
+Items 1 and 2 are the median over the timed steps of each step's CPU time of the process
+(``time.process_time``; item 5 the CPU time of all runs), the same as wall time for this
+single-threaded code on an idle machine and less sensitive to other processes on a shared one.
+The ratios are measured in the same run, so load that remains (caches, memory bandwidth) acts on
+both sides. The runner's time (3) and the compile times (4) are wall time.
 
 ``--quick`` runs every stage at toy sizes (4 runs × 50 particles, 3 steps, one timing repeat, the
 compile script on the existing numba cache): what the test suite runs so that a broken script
@@ -94,11 +95,13 @@ def time_batched(data, steps: int, particles: int = PARTICLES, kernel: str = "ex
     for k in range(1, 3):
         est.predict(data.inputs[:, k - 1])
         est.update(data.measurements[:, k], data.inputs[:, k])
-    start = time.process_time()
+    times = []
     for k in range(3, steps + 3):
+        start = time.process_time()
         est.predict(data.inputs[:, k - 1])
         est.update(data.measurements[:, k], data.inputs[:, k])
-    return (time.process_time() - start) / (steps * data.x0.shape[0] * particles) * 1e9
+        times.append(time.process_time() - start)
+    return float(np.median(times)) / (data.x0.shape[0] * particles) * 1e9
 
 
 def on_backend(backend: str, fun: Callable[[], float]) -> float:
@@ -195,8 +198,9 @@ def time_filterpy_loop(data, steps: int, particles: int = PARTICLES) -> float:
     rng = np.random.default_rng(0)
     B = data.x0.shape[0]
     clouds = [data.x0[i, 0] + np.sqrt(data.P0[0, 0]) * rng.standard_normal(particles) for i in range(B)]
-    start = time.process_time()
+    times = []
     for k in range(1, steps + 1):
+        start = time.process_time()
         for i in range(B):
             x = clouds[i]
             x = 0.5 * x + 25.0 * x / (1.0 + x * x) + 8.0 * np.cos(1.2 * data.inputs[i, k - 1, 0])
@@ -204,7 +208,8 @@ def time_filterpy_loop(data, steps: int, particles: int = PARTICLES) -> float:
             w = np.exp(-0.5 * (data.measurements[i, k, 0] - x * x / 20.0) ** 2 / r)
             w /= w.sum()
             clouds[i] = x[stratified_resample(w)]
-    return (time.process_time() - start) / (steps * B * particles) * 1e9
+        times.append(time.process_time() - start)
+    return float(np.median(times)) / (B * particles) * 1e9
 
 
 def time_full_experiment(data, particles: int = PARTICLES) -> float:
