@@ -458,8 +458,8 @@ class BootstrapPF(ParticleFilter):
             raise ConfigError(*problems[0])
         super().__init__(model, **options)
         self.kernel = kernel
-        self._whitening, self._log_norm = measurement_whitening(np.asarray(model.R, dtype=float))
         if kernel == "fast":
+            self._whitening, self._log_norm = measurement_whitening(np.asarray(model.R, dtype=float))
             warm_up_fast_step()
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
