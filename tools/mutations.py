@@ -71,6 +71,7 @@ VISIBLE = "tests/test_failures_visible.py::"
 METRIC_PARTS = "tests/test_metric_parts.py::"
 GAUSSIAN_FAMILY = "tests/test_gaussian_filter_family.py::"
 PENDULUM_BOOK = "tests/test_pendulum_book.py::"
+FAST_PF = "tests/test_particle_fast_mode.py::"
 
 MUTATIONS = (
     Mutation(
@@ -1139,6 +1140,18 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "crossing = t[prev] + frac * (t[k] - t[prev])",
         "crossing = t[k] + 0 * frac",
         ("tests/test_closed_loop.py::test_rise_time_matches_hand_computed_responses",),
+        "fast bootstrap step's log-likelihood with half its exponent",
+        "src/quadest/numerics/particle_kernels.py",
+        "            value = log_norm - 0.5 * maha\n",
+        "            value = log_norm - 0.25 * maha\n",
+        (FAST_PF + "test_fast_step_kernels_give_the_reference_numbers_to_round_off[False-True-True-stratified]",),
+    ),
+    Mutation(
+        "fast mode keeps the weights of the resampled cloud",
+        "src/quadest/estimators/particle.py",
+        "self.logw = np.full_like(out.w, self._log_uniform)",
+        "self.logw = np.log(out.w)",
+        (FAST_PF + "test_fast_mode_rmse_agrees_with_exact_mode_within_monte_carlo_error[numba]",),
     ),
 )  # fmt: skip
 

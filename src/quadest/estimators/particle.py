@@ -8,6 +8,8 @@ operation works on all particles of all runs at once, and every run draws from i
 numba backend (``QUADEST_KERNELS``, docs/benchmarks.md) the draws, the Gaussian log-densities, the
 normalisation with the ESS, the resampling and the gather of the particles are compiled kernels
 (:mod:`quadest.numerics.particle_kernels`) that give their numpy references' numbers bit for bit.
+The bootstrap filter's ``kernel: fast`` (:class:`BootstrapPF`) trades that for a fused step whose
+numbers agree with the exact mode's within Monte Carlo error (:mod:`quadest.numerics.fast_bootstrap`).
 
 One step (sequential importance sampling with resampling; Gordon, Salmond & Smith 1993; Doucet,
 Godsill & Andrieu 2000, "On sequential Monte Carlo sampling methods for Bayesian filtering"):
@@ -63,6 +65,13 @@ from quadest.estimators.particle_smoothing import ParticleCloud
 from quadest.models.base import FilterModel
 from quadest.numerics import psd_sqrt
 from quadest.numerics.draws import particle_kernels, standard_normals, warm_up_particle_kernels
+from quadest.numerics.fast_bootstrap import (
+    FAST_SCHEMES,
+    draw_step_uniforms,
+    fast_bootstrap_step,
+    measurement_whitening,
+    warm_up_fast_step,
+)
 from quadest.numerics.resampling import (
     RESAMPLING_SCHEMES,
     check_scheme,
@@ -393,16 +402,93 @@ class ParticleFilter(Estimator):
         return self._cov
 
 
+KERNELS = ("exact", "fast")
+
+
 @dataclass
 class PFParams(ParticleParams):
-    """Configuration of ``estimator=pf``: the bootstrap filter (see :class:`ParticleParams`)."""
+    """Configuration of ``estimator=pf``: the bootstrap filter (see :class:`ParticleParams`), with
+    ``kernel``: ``exact`` (every number bit for bit as the numpy references) or ``fast`` (the
+    fused step of :mod:`quadest.numerics.fast_bootstrap`, within Monte Carlo error of exact)."""
 
     kind: str = "pf"
+    kernel: str = "exact"
+
+    @staticmethod
+    def constraints(values: Mapping[str, Any], n: int) -> list[tuple[str, Any, str]]:
+        """:meth:`ParticleParams.constraints`, ``kernel`` and what ``kernel: fast`` supports."""
+        return particle_constraints(values) + fast_kernel_constraints(values)
+
+
+def fast_kernel_constraints(values: Mapping[str, Any]) -> list[tuple[str, Any, str]]:
+    """``(key, value, allowed)`` for a ``kernel`` outside :data:`KERNELS` and, with ``kernel:
+    fast``, a resampling scheme it lacks (residual) or roughening (not fused)."""
+    kernel = values.get("kernel", "exact")
+    if kernel not in KERNELS:
+        return [("kernel", kernel, f"one of {list(KERNELS)}")]
+    if kernel != "fast":
+        return []
+    problems = []
+    if values.get("resampling", "systematic") not in FAST_SCHEMES:
+        problems.append(("resampling", values["resampling"], f"one of {list(FAST_SCHEMES)} with kernel: fast"))
+    if values.get("roughening", 0.0) != 0.0:
+        problems.append(("roughening", values["roughening"], "0 with kernel: fast"))
+    return problems
 
 
 class BootstrapPF(ParticleFilter):
     """Bootstrap / SIR particle filter (Gordon, Salmond & Smith 1993): the transition prior is the
-    proposal, so the incremental weight is the likelihood ``p(y_k | x_k^i)``."""
+    proposal, so the incremental weight is the likelihood ``p(y_k | x_k^i)``.
+
+    Args:
+        kernel: ``exact`` (default: :meth:`ParticleFilter.update`, every number as its numpy
+            references give it) or ``fast`` (after the proposal, one fused pass per run of
+            :func:`~quadest.numerics.fast_bootstrap.fast_bootstrap_step`: same filter, numbers
+            within Monte Carlo error of ``exact``; resampling multinomial, systematic or
+            stratified, no roughening).
+        **options: the options of :class:`ParticleFilter`.
+    """
 
     config_name = "pf"
     Params = PFParams
+
+    def __init__(self, model: FilterModel, kernel: str = "exact", **options: Any) -> None:
+        problems = fast_kernel_constraints({"kernel": kernel, **options})
+        if problems:
+            raise ConfigError(*problems[0])
+        super().__init__(model, **options)
+        self.kernel = kernel
+        if kernel == "fast":
+            self._whitening, self._log_norm = measurement_whitening(np.asarray(model.R, dtype=float))
+            warm_up_fast_step()
+
+    def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
+        """The exact step, or with ``kernel: fast`` the proposal and the fused step."""
+        if self.kernel == "exact":
+            super().update(z, u, sensor)
+            return
+        self.step += 1
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            x_new, _ = self.propose(self._u_prev, z, u)
+            hx = self.model.h(x_new, u)
+        uniforms = draw_step_uniforms(self.resampling, self.rngs, self.N)
+        out = fast_bootstrap_step(
+            x_new, hx, z, self._whitening, self._log_norm, self.logw, uniforms, self.resampling,
+            self.schedule == "every_step", self.ess_threshold, ~self.failed, self.estimate == "resampled",
+            self.log_floor, self.weights == "linear_floor",
+        )  # fmt: skip
+        self.x, self.ess, self._mean, self._cov = out.x, out.ess, out.mean, out.cov
+        self.floored_steps += out.floored
+        self.vanished_steps += out.vanished
+        if out.vanished.any() and self.vanished_weights == "flag":
+            self.flag(np.flatnonzero(out.vanished), f"all particle weights vanished at step {self.step}")
+        self.ess_sum += self.ess
+        self.resample_count += out.resampled
+        if self.smoothing:
+            self.smoother_cloud = ParticleCloud(x_new.copy(), out.w.copy(), self._u_prev.copy())
+        if out.resampled.all():
+            self.logw = np.full_like(out.w, self._log_uniform)
+        else:
+            with np.errstate(divide="ignore"):
+                self.logw = np.where(out.resampled[:, None], self._log_uniform, np.log(out.w))
+        self._park_failed()

@@ -1,6 +1,8 @@
 """Compiled kernels (numba) for the particle filters' per-step work, one run after the other.
 
-Each kernel gives exactly what its numpy reference gives, bit for bit (tests/test_particle_kernels.py):
+Each kernel of the exact path gives exactly what its numpy reference gives, bit for bit
+(tests/test_particle_kernels.py); the fast step's kernels (the last list) give their reference's
+numbers to round-off (tests/test_particle_fast_mode.py):
 
 - :func:`standard_normal_kernel` — what ``rngs[b].standard_normal(out[b].shape)`` draws, for the
   runs ``runs`` (numba's ``np.random.Generator`` runs numpy's own algorithms on the generator's
@@ -23,6 +25,15 @@ Each kernel gives exactly what its numpy reference gives, bit for bit (tests/tes
   than numpy's vectorised passes; inside the filter's step, where they save the temporaries, the
   step is about 1 ns per particle faster with them (docs/benchmarks.md).
 
+The fast step of ``pf`` with ``kernel: fast`` (reference:
+:func:`quadest.numerics.fast_bootstrap.fast_bootstrap_step_reference`):
+
+- :func:`uniform_kernel` — each run's uniforms from its own generator (numpy's ``random`` stream);
+- :func:`fast_log_weights_kernel` — log-likelihood, previous log-weights, the shift by the maximum;
+- :func:`fast_resample_kernel` — after numpy's ``exp``: normalisation by a reciprocal product, ESS,
+  selection (:func:`_strata`, :func:`_search`), gather and moments in one pass per run. Sums may be
+  reassociated (``fastmath`` without the no-NaN and no-∞ flags, so NaN and ±∞ keep their meaning).
+
 Why a compiled step pays here: the numpy path makes ~10 passes over the particles for one
 resampling; the kernels make one pass per run while its particles are in cache. Threads: ``parallel=True``
 with ``prange`` over the runs drew normals 30× slower than the serial loop on the development
@@ -37,6 +48,8 @@ import numpy as np
 from numba import njit
 
 _JIT = {"cache": True, "error_model": "numpy", "nogil": True}
+# the fast step's kernels may reassociate sums (vectorised, not bit for bit); NaN and ±∞ keep their meaning
+_FAST_JIT = {**_JIT, "fastmath": {"reassoc", "contract", "arcp", "nsz"}}
 
 MULTINOMIAL, SYSTEMATIC, STRATIFIED, RESIDUAL = 0, 1, 2, 3
 
@@ -273,3 +286,127 @@ def normalise_kernel(weights: np.ndarray, squares: np.ndarray, ess: np.ndarray) 
             row[i] /= total
             squares[i] = row[i] * row[i]
         ess[b] = 1.0 / _pairwise_sum(squares, tasks, partial)
+
+
+@njit(**_JIT)
+def uniform_kernel(rngs, runs: np.ndarray, out: np.ndarray) -> None:
+    """``out[r] = rngs[runs[r]].random(K)`` for every row ``r`` of ``out`` (R, K)."""
+    for r in range(out.shape[0]):
+        generator = rngs[runs[r]]
+        for k in range(out.shape[1]):
+            out[r, k] = generator.random()
+
+
+@njit(**_FAST_JIT)
+def _cloud_moments(x: np.ndarray, w: np.ndarray, uniform: bool, mean: np.ndarray, cov: np.ndarray) -> None:
+    """Mean and covariance of the cloud ``x`` (N, n) with weights ``w`` (equal weights 1/N when
+    ``uniform``); particles of zero weight are left out (they may be non-finite). One scalar sum
+    per entry over the particles, so that the sums vectorise."""
+    N, n = x.shape
+    inverse_n = 1.0 / N
+    for j in range(n):
+        total = 0.0
+        for i in range(N):
+            wi = inverse_n if uniform else w[i]
+            total += wi * x[i, j] if wi > 0 else 0.0
+        mean[j] = total
+    for j in range(n):
+        for k in range(j + 1):
+            total = 0.0
+            for i in range(N):
+                wi = inverse_n if uniform else w[i]
+                total += wi * (x[i, j] - mean[j]) * (x[i, k] - mean[k]) if wi > 0 else 0.0
+            cov[j, k] = total
+            cov[k, j] = total
+
+
+@njit(**_FAST_JIT)
+def fast_log_weights_kernel(
+    hx: np.ndarray, z: np.ndarray, whitening: np.ndarray, log_norm: float, log_weights: np.ndarray,
+    log_floor: float, floor: bool, shifted: np.ndarray, vanished: np.ndarray, floored: np.ndarray,
+) -> None:  # fmt: skip
+    """The first pass of the fast bootstrap step (``kernel: fast``), per run: the log-likelihood
+    ``log_norm − ½‖L⁻¹(z − h(xᵢ))‖²`` (``whitening = L⁻¹`` lower triangular), floored with
+    ``floor``, plus ``log_weights``, shifted by its finite maximum into ``shifted`` (non-finite:
+    −∞; a ``vanished`` run, none finite: zeros), and whether no log-likelihood exceeded
+    ``log_floor`` (``floored``). Steps 1–2 of
+    :func:`quadest.numerics.fast_bootstrap.fast_bootstrap_step_reference` before its ``exp``."""
+    B, N, m = hx.shape
+    for b in range(B):
+        any_above = False
+        top = -np.inf
+        for i in range(N):
+            if m == 1:
+                white = whitening[0, 0] * (z[b, 0] - hx[b, i, 0])
+                maha = white * white
+            else:
+                maha = 0.0
+                for j in range(m):
+                    acc = 0.0
+                    for k in range(j + 1):
+                        acc += whitening[j, k] * (z[b, k] - hx[b, i, k])
+                    maha += acc * acc
+            value = log_norm - 0.5 * maha
+            any_above |= value > log_floor
+            if floor and value == value:  # logaddexp(value, log_floor); NaN stays NaN
+                high, low = (value, log_floor) if value > log_floor else (log_floor, value)
+                value = high + np.log1p(np.exp(low - high)) if low > -np.inf else high
+            value += log_weights[b, i]
+            shifted[b, i] = value
+            if value > top and value < np.inf:
+                top = value
+        floored[b] = not any_above
+        vanished[b] = top == -np.inf
+        for i in range(N):
+            value = shifted[b, i]
+            shifted[b, i] = 0.0 if vanished[b] else (value - top if value < np.inf else -np.inf)
+
+
+@njit(**_FAST_JIT)
+def fast_resample_kernel(
+    x: np.ndarray, w: np.ndarray, uniforms: np.ndarray, scheme: int, every_step: bool, threshold: float,
+    active: np.ndarray, estimate_resampled: bool, x_out: np.ndarray, ess: np.ndarray, resampled: np.ndarray,
+    mean: np.ndarray, cov: np.ndarray,
+) -> None:  # fmt: skip
+    """The second pass of the fast bootstrap step, per run: the unnormalised weights ``w`` (B, N)
+    normalised in place by the product with ``1/Σ``, the ESS, then for the runs due the selection
+    ``#{j : c_j ≤ u}`` on the cumulative weights (:func:`_strata`, :func:`_search`), the gather into
+    ``x_out`` (other runs: a copy) and the estimate's moments. Steps 2–4 of
+    :func:`quadest.numerics.fast_bootstrap.fast_bootstrap_step_reference` after its ``exp``."""
+    B, N, n = x.shape
+    c = np.empty(N)
+    padded = np.empty(N + 2)
+    counts = np.empty(N + 1, dtype=np.intp)
+    idx = np.empty(N, dtype=np.intp)
+    for b in range(B):
+        total = 0.0
+        for i in range(N):
+            total += w[b, i]
+        scale = 1.0 / total
+        squares = 0.0
+        running = 0.0
+        for i in range(N):
+            wi = w[b, i] * scale
+            w[b, i] = wi
+            squares += wi * wi
+            running += wi
+            c[i] = running
+        ess[b] = 1.0 / squares
+        due = active[b] and (every_step or ess[b] < threshold * N)
+        resampled[b] = due
+        if not estimate_resampled or not due:
+            _cloud_moments(x[b], w[b], False, mean[b], cov[b])
+        if not due:
+            x_out[b] = x[b]
+            continue
+        if scheme == MULTINOMIAL:
+            for i in range(N):
+                idx[i] = _search(c, uniforms[b, i])
+        else:
+            _strata(c, uniforms[b], scheme == SYSTEMATIC, padded, counts, idx)
+        for i in range(N):
+            k = idx[i]
+            for j in range(n):
+                x_out[b, i, j] = x[b, k, j]
+        if estimate_resampled:
+            _cloud_moments(x_out[b], w[b], True, mean[b], cov[b])
