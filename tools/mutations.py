@@ -1140,6 +1140,8 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "crossing = t[prev] + frac * (t[k] - t[prev])",
         "crossing = t[k] + 0 * frac",
         ("tests/test_closed_loop.py::test_rise_time_matches_hand_computed_responses",),
+    ),
+    Mutation(
         "fast bootstrap step's log-likelihood with half its exponent",
         "src/quadest/numerics/particle_kernels.py",
         "            value = log_norm - 0.5 * maha\n",
