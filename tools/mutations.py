@@ -872,8 +872,8 @@ MUTATIONS = (
     Mutation(
         "a sigma-point rule the augmented dimension rules out marks every run diverged",
         "src/quadest/estimators/sigma_point.py",
-        '            raise ConfigError(f"{type(self).config_name}.rule", rule.name, f"{exc} (dimension {dim})") from None',
-        "            raise",
+        "        except ValueError as exc:  # a configuration the rule cannot serve",
+        "        except ZeroDivisionError as exc:  # a configuration the rule cannot serve",
         ("tests/test_gauss_hermite_grid.py::test_a_grid_too_large_only_when_augmented_fails_the_job",),
     ),
 )  # fmt: skip
