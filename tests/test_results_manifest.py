@@ -128,7 +128,7 @@ def test_regeneration_keeps_the_folder_readme_no_command_makes(tmp_path, monkeyp
     (folder / "stale.csv").write_text("old")
     monkeypatch.setattr(tool, "ROOT", tmp_path)
 
-    def fake_run(command: str) -> bool:
+    def fake_run(command: str, env: dict[str, str] | None = None) -> bool:
         folder.mkdir(parents=True)
         (folder / "fresh.csv").write_text("new")
         return True
