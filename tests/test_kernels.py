@@ -441,12 +441,10 @@ def test_a_bad_backend_is_a_one_line_config_error(monkeypatch):
     with pytest.raises(ConfigError, match=r"^QUADEST_KERNELS='jax' is invalid: allowed values are numba, numpy$"):
         kernel_backend()
 
-    class Run:  # the fields validate_run reads, all valid
-        runs, seed, sample_period, duration, divergence_bound, workers = 1, 0, 0.01, 1.0, 50.0, 0
-        output = type("Output", (), {"saved_runs": 0})
+    from quadest.app.schema import ExperimentConf
 
     with pytest.raises(ConfigError, match="QUADEST_KERNELS"):
-        validate_run(Run)
+        validate_run(ExperimentConf())  # every other field at its valid default
 
 
 # --- the quadrotor model's compiled f and h ---
