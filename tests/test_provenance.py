@@ -10,13 +10,18 @@ import os
 import shutil
 import subprocess
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCE = ["pyproject.toml", "README.md", "src", "conf", "experiments", "data/px4", "tools/hatch_build.py"]
+FORCE_INCLUDED = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["hatch"]["build"]["targets"]["wheel"][
+    "force-include"
+]
+SOURCE = ["pyproject.toml", "README.md", "src", "tools/hatch_build.py", *FORCE_INCLUDED]
+"""What a wheel is built from: the package, the build hook and every folder the wheel force-includes."""
 PROBE = "import json, quadest.app.provenance as p; print(json.dumps(p.provenance()))"
 
 pytestmark = pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
