@@ -68,7 +68,7 @@ def test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimens
     nees_t[7] = np.nan  # a step without the statistic does not count
     result = synthetic_result(data, nees_t, nis_t, alive_t)
     params = {"probe": {"kind": "probe"}}
-    tables = metric_tables([result], data, params, {}, np.full((K1, n), np.nan), 0)
+    tables = metric_tables([result], data, params, {}, np.full((K1, n), np.nan))
     entry = estimator_entries([result], tables, params, {"probe": False})["probe"]
 
     assert entry["nees_in_band"] == pytest.approx(expected_share(nees_t, alive_t, n), abs=0)

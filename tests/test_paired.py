@@ -41,11 +41,11 @@ def test_holm_matches_hand_computation():
 
 
 def test_constant_shift_has_known_difference_ci_and_exact_p_values():
-    """est = ref + 0.25 exactly (binary fractions): d̄ = 0.25, every bootstrap mean is 0.25, the
+    """est = ref + 0.25 exactly (binary fractions): d̄ = 0.25 with a zero-width interval, the
     Wilcoxon signed-rank p-value with n = 8 equal positive differences is 2/2⁸ (all signs
     positive, two-sided), and the t statistic is infinite (p = 0)."""
     ref = 1.0 + np.arange(16).reshape(8, 2) / 8.0
-    table = paired_comparison(metrics({"ref": ref, "est": ref + 0.25}), seed=1)
+    table = paired_comparison(metrics({"ref": ref, "est": ref + 0.25}))
     r = rows(table, "est - ref")
     assert (r["mean_diff"] == 0.25).all() and (r["ci_low"] == 0.25).all() and (r["ci_high"] == 0.25).all()
     np.testing.assert_allclose(r["rel_diff"], 0.25 / ref.mean(axis=0), rtol=1e-15)
@@ -59,7 +59,7 @@ def test_exact_small_sample_wilcoxon_p_value():
     so the exact two-sided p-value is 2/64."""
     ref = np.full((6, 2), 10.0)
     est = ref + np.arange(1.0, 7.0)[:, None]
-    r = rows(paired_comparison(metrics({"ref": ref, "est": est}), seed=1), "est - ref")
+    r = rows(paired_comparison(metrics({"ref": ref, "est": est})), "est - ref")
     assert (r["p_wilcoxon"] == 2.0 / 64).all()
     d = np.arange(1.0, 7.0)  # t = d̄ / (s/√n) by hand
     t = d.mean() / (d.std(ddof=1) / np.sqrt(6))
@@ -68,7 +68,7 @@ def test_exact_small_sample_wilcoxon_p_value():
 
 def test_identical_estimators_do_not_differ():
     ref = np.random.default_rng(0).uniform(1, 2, (10, 2))
-    table = paired_comparison(metrics({"a": ref, "twin": ref.copy()}), seed=1)
+    table = paired_comparison(metrics({"a": ref, "twin": ref.copy()}))
     assert (table["mean_diff"] == 0).all() and (table["ci_low"] == 0).all() and (table["ci_high"] == 0).all()
     assert (table["p_wilcoxon"] == 1).all() and (table["p_ttest"] == 1).all()
     assert summary_lines(table)[0].startswith("twin - a: 0 of 2 states differ")
@@ -80,9 +80,9 @@ def test_round_off_differences_count_as_zero():
     difference. A difference of 1e-5 relative is beyond the floor and is counted."""
     ref = np.random.default_rng(1).uniform(1, 2, (30, 2))
     for rel in (1e-13, 5e-7):
-        table = paired_comparison(metrics({"a": ref, "b": ref * (1 + rel)}), seed=1)
+        table = paired_comparison(metrics({"a": ref, "b": ref * (1 + rel)}))
         assert (table["p_wilcoxon"] == 1).all() and (table["mean_diff"] == 0).all()
-    table = paired_comparison(metrics({"a": ref, "b": ref * (1 + 1e-5)}), seed=1)
+    table = paired_comparison(metrics({"a": ref, "b": ref * (1 + 1e-5)}))
     assert (table["p_wilcoxon"] < 1e-5).all()
 
 
@@ -91,7 +91,7 @@ def test_p_values_orientation_and_holm_match_scipy():
     a = rng.uniform(1, 2, (15, 2))
     b = a + rng.normal(0.05, 0.1, (15, 2))
     c = a + rng.normal(-0.02, 0.1, (15, 2))
-    table = paired_comparison(metrics({"a": a, "b": b, "c": c}), seed=3)
+    table = paired_comparison(metrics({"a": a, "b": b, "c": c}))
     assert list(dict.fromkeys(table["pair"])) == ["b - a", "c - a", "c - b"]
     for pair, (est, ref) in {"b - a": (b, a), "c - a": (c, a), "c - b": (c, b)}.items():
         r = rows(table, pair)
@@ -115,9 +115,9 @@ def test_diverged_runs_are_excluded_pairwise():
     flags[2] = True
     b_bad = b.copy()
     b_bad[2] = 1e6  # what a diverged run looks like
-    table = paired_comparison(metrics({"a": a, "b": b_bad, "c": c}, {"b": flags}), seed=5)
+    table = paired_comparison(metrics({"a": a, "b": b_bad, "c": c}, {"b": flags}))
     keep = ~flags
-    reference = paired_comparison(metrics({"a": a[keep], "b": b[keep]}), seed=5)
+    reference = paired_comparison(metrics({"a": a[keep], "b": b[keep]}))
     cols = ["mean_diff", "p_wilcoxon", "p_ttest", "runs"]
     pd.testing.assert_frame_equal(rows(table, "b - a")[cols], rows(reference, "b - a")[cols])
     assert (rows(table, "b - a")["excluded_runs"] == 1).all()
@@ -125,58 +125,64 @@ def test_diverged_runs_are_excluded_pairwise():
     assert "(1 excluded: diverged in either)" in summary_lines(table)[0]
 
 
-def test_bootstrap_is_paired_over_runs():
-    """Runs differ a lot (RMSE 1..10) but the estimators differ by 0.01 ± 0.001 in every run: a
-    bootstrap over pairs gives a CI about as wide as the spread of the differences; resampling
-    the two estimators' runs independently would make it hundreds of times wider."""
+def test_the_interval_is_paired_over_runs():
+    """Runs differ a lot (RMSE 1..10) but the estimators differ by 0.01 ± 0.001 in every run: an
+    interval over paired differences is about as wide as their spread; treating the two
+    estimators' runs as independent samples would make it hundreds of times wider."""
     rng = np.random.default_rng(6)
     ref = rng.uniform(1, 10, (50, 2))
     est = ref + rng.normal(0.01, 0.001, (50, 2))
-    r = rows(paired_comparison(metrics({"ref": ref, "est": est}), seed=7), "est - ref")
+    r = rows(paired_comparison(metrics({"ref": ref, "est": est})), "est - ref")
     assert ((r["ci_high"] - r["ci_low"]) < 0.002).all()
     assert ((r["ci_low"] < r["mean_diff"]) & (r["mean_diff"] < r["ci_high"])).all()
 
 
-def test_bootstrap_ci_matches_the_normal_interval_for_a_large_sample():
-    """n = 400 normal differences: the percentile bootstrap CI of the mean approaches
-    d̄ ± 1.96 s/√n. Monte Carlo error of a 2.5 % quantile from 4000 resamples is about 2 % of
-    the half-width, so 10 % is five standard errors."""
+def test_the_intervals_are_student_t_of_the_mean_and_fieller_of_the_ratio():
+    """Written out here: the mean difference's interval is d̄ ± t₀.₉₇₅,ₙ₋₁ s_d/√n; each end ρ of
+    the relative difference's interval is a ratio at which the paired t statistic of d − ρ R
+    (scipy's one-sample t-test) sits exactly at ±t₀.₉₇₅,ₙ₋₁ (Fieller 1954: the ratios the test
+    does not reject). A normal quantile, ddof=0 or unpaired residuals move both far beyond round-off."""
     rng = np.random.default_rng(8)
-    ref = rng.uniform(5, 6, (400, 2))
-    d = rng.normal(0.1, 1.0, (400, 2))
-    r = rows(paired_comparison(metrics({"ref": ref, "est": ref + d}), seed=9), "est - ref")
-    half = 1.96 * d.std(axis=0, ddof=1) / np.sqrt(400)
-    np.testing.assert_allclose(r["ci_high"] - r["mean_diff"], half, rtol=0.1)
-    np.testing.assert_allclose(r["mean_diff"] - r["ci_low"], half, rtol=0.1)
+    ref = rng.uniform(5, 6, (12, 2))
+    d = 0.3 * (ref - 5.5) + rng.normal(0.1, 0.2, (12, 2))  # correlated with the reference's RMSE
+    est = ref + d
+    r = rows(paired_comparison(metrics({"ref": ref, "est": est})), "est - ref")
+    t = stats.t.ppf(0.975, 11)
+    dd = est - ref
+    half = t * dd.std(axis=0, ddof=1) / np.sqrt(12)
+    np.testing.assert_allclose(r["ci_low"], dd.mean(axis=0) - half, rtol=1e-12)
+    np.testing.assert_allclose(r["ci_high"], dd.mean(axis=0) + half, rtol=1e-12)
+    for j, state in enumerate(STATES):
+        low, high = r.loc[state, "rel_ci_low"], r.loc[state, "rel_ci_high"]
+        assert low < dd[:, j].mean() / ref[:, j].mean() < high
+        for end, sign in ((low, 1.0), (high, -1.0)):  # below the estimate the residuals' mean is > 0
+            statistic = stats.ttest_1samp(dd[:, j] - end * ref[:, j], 0.0).statistic
+            np.testing.assert_allclose(statistic, sign * t, rtol=1e-9)
 
 
-def test_bootstrap_is_seeded_without_global_rng():
+def test_the_comparison_draws_nothing_and_does_not_depend_on_other_estimators():
     rng = np.random.default_rng(10)
     a, b, c = (rng.uniform(1, 2, (20, 2)) for _ in range(3))
     np.random.seed(0)
     before = np.random.get_state()[1].copy()
-    first = paired_comparison(metrics({"a": a, "b": b}), seed=11)
+    first = paired_comparison(metrics({"a": a, "b": b}))
     assert np.array_equal(np.random.get_state()[1], before)
-    again = paired_comparison(metrics({"a": a, "b": b}), seed=11)
-    pd.testing.assert_frame_equal(first, again)
-    other = paired_comparison(metrics({"a": a, "b": b}), seed=12)
-    assert not np.array_equal(first["ci_low"], other["ci_low"])
-    with_c = paired_comparison(metrics({"c": c, "a": a, "b": b}), seed=11)  # another estimator: same draws for b - a
+    with_c = paired_comparison(metrics({"c": c, "a": a, "b": b}))  # another estimator: the same b - a
     ci = ["ci_low", "ci_high", "rel_ci_low", "rel_ci_high"]
     pd.testing.assert_frame_equal(rows(with_c, "b - a")[ci], rows(first, "b - a")[ci])
 
 
 def test_fewer_than_two_runs_are_not_tested():
-    table = paired_comparison(metrics({"a": np.ones((1, 2)), "b": np.full((1, 2), 2.0)}), seed=1)
+    table = paired_comparison(metrics({"a": np.ones((1, 2)), "b": np.full((1, 2), 2.0)}))
     assert table["p_wilcoxon"].isna().all() and table["ci_low"].isna().all()
     assert (table["mean_diff"] == 1.0).all()
     assert summary_lines(table) == ["b - a: not tested, 1 runs"]
     every_run_diverged = {"b": np.ones(3, dtype=bool)}
-    table = paired_comparison(metrics({"a": np.ones((3, 2)), "b": np.full((3, 2), np.nan)}, every_run_diverged), seed=1)
+    table = paired_comparison(metrics({"a": np.ones((3, 2)), "b": np.full((3, 2), np.nan)}, every_run_diverged))
     assert table["mean_diff"].isna().all() and (table["runs"] == 0).all()
     assert summary_lines(table) == ["b - a: not tested, 0 runs (3 excluded: diverged in either)"]
 
 
 def test_single_estimator_gives_an_empty_table():
-    table = paired_comparison(metrics({"a": np.ones((5, 2))}), seed=1)
+    table = paired_comparison(metrics({"a": np.ones((5, 2))}))
     assert table.empty and summary_lines(table) == []

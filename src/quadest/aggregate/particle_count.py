@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import zlib
 from pathlib import Path
 
 import matplotlib
@@ -44,6 +43,7 @@ from scipy import stats
 
 from quadest.aggregate.job_cli import read_job_metrics
 from quadest.aggregate.statistics import with_confidence_interval
+from quadest.evaluation.intervals import fieller_interval, mean_and_half_width
 
 FIGURE = "rmse_vs_particles.png"
 SERIES = "rmse_vs_particles.csv"
@@ -53,10 +53,8 @@ NOISE_CHANGE = "noise_change.csv"
 TIME_EFFICIENCY = "time_efficiency.csv"
 EFFICIENCY_PAIRS = (("ilopf", "ekpf"), ("ilopf_uniform", "ekpf"))
 """(family, reference family) compared at equal particle count: seed 001's ILOPF against its EKPF."""
-RESAMPLES = 4000
-Job = tuple[float, pd.DataFrame, pd.DataFrame, int]
-"""One job of a sweep over ``model.Q``: ``(Q, metrics.csv, rmse_summary.csv, seed)``."""
-_TAG = 0x65666621  # keeps these bootstrap draws apart from the simulation's and the paired comparison's
+Job = tuple[float, pd.DataFrame, pd.DataFrame]
+"""One job of a sweep over ``model.Q``: ``(Q, metrics.csv, rmse_summary.csv)``."""
 
 
 def family_of(estimator: str, particles: float) -> str:
@@ -89,37 +87,24 @@ def per_run_rmse(metrics: pd.DataFrame) -> pd.DataFrame:
     return wide.unstack("estimator")
 
 
-def _bootstrap_rng(seed: int, *labels: str) -> np.random.Generator:
-    key = zlib.crc32("\0".join(labels).encode())
-    return np.random.default_rng(np.random.SeedSequence([int(seed), _TAG, key]))
-
-
-def ratio_interval(
-    numerator: np.ndarray, denominator: np.ndarray, rng: np.random.Generator, confidence: float
-) -> tuple[float, float, float]:
-    """``mean(numerator) / mean(denominator)`` of paired per-run values and its percentile
-    bootstrap interval (Efron & Tibshirani 1993, §13.3): the same resampled runs for both."""
-    n = numerator.size
-    weights = rng.multinomial(n, np.full(n, 1.0 / n), size=RESAMPLES) / n
-    boot = (weights @ numerator) / (weights @ denominator)
-    tail = (1.0 - confidence) / 2.0
-    low, high = np.quantile(boot, [tail, 1.0 - tail])
-    return float(numerator.mean() / denominator.mean()), float(low), float(high)
+def ratio_interval(numerator: np.ndarray, denominator: np.ndarray, confidence: float) -> tuple[float, float, float]:
+    """``mean(numerator) / mean(denominator)`` of paired per-run values and its Fieller interval
+    (:mod:`quadest.evaluation.intervals`; NaN ends if unbounded)."""
+    ratio, low, high = (
+        float(v[0]) for v in fieller_interval(numerator[:, None], denominator[:, None], 1.0 - confidence)
+    )
+    return ratio, low, high
 
 
 def diff_interval(
-    after: np.ndarray, before: np.ndarray, rng: np.random.Generator, confidence: float
+    after: np.ndarray, before: np.ndarray, confidence: float
 ) -> tuple[float, float, float, float, float, float]:
     """Mean paired difference ``after − before``, its relative size ``/ mean(before)`` and the
-    percentile bootstrap intervals of both (the same resampled runs)."""
-    n = after.size
-    weights = rng.multinomial(n, np.full(n, 1.0 / n), size=RESAMPLES) / n
-    boot_d, boot_b = weights @ (after - before), weights @ before
-    tail = (1.0 - confidence) / 2.0
-    lo, hi = np.quantile(boot_d, [tail, 1.0 - tail])
-    rlo, rhi = np.quantile(boot_d / boot_b, [tail, 1.0 - tail])
-    d = float((after - before).mean())
-    return d, float(lo), float(hi), d / float(before.mean()), float(rlo), float(rhi)
+    intervals of both: Student's t of the difference, Fieller's of the ratio
+    (:mod:`quadest.evaluation.intervals`)."""
+    d, half = (float(v[0]) for v in mean_and_half_width((after - before)[:, None], 1.0 - confidence))
+    rel, rel_low, rel_high = ratio_interval(after - before, before, confidence)
+    return d, d - half, d + half, rel, rel_low, rel_high
 
 
 def _particle_counts(series: pd.DataFrame, family: str) -> dict[int, str]:
@@ -127,10 +112,10 @@ def _particle_counts(series: pd.DataFrame, family: str) -> dict[int, str]:
     return {int(p): e for p, e in zip(s["particles"], s["estimator"], strict=True)}
 
 
-def efficiency_table(metrics: pd.DataFrame, seed: int, confidence: float = 0.95) -> pd.DataFrame:
+def efficiency_table(metrics: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     """Seed 001's efficiency ratio of each pair of :data:`EFFICIENCY_PAIRS` at every particle
     count both families have: ``error_ratio = mean RMSE_ref / mean RMSE_est`` (error-based
-    ``η_est / η_ref``) over the runs that diverged in neither, with its paired bootstrap interval
+    ``η_est / η_ref``) over the runs that diverged in neither, with its paired Student-t interval
     at ``confidence``; the job's times per step and ``time_ratio = t_ref / t_est``;
     ``time_efficiency_ratio`` = their product (time-based ``η_t,est / η_t,ref``; one timing per
     job, so no interval here: :func:`time_efficiency` has one over the jobs of a sweep)."""
@@ -144,7 +129,7 @@ def efficiency_table(metrics: pd.DataFrame, seed: int, confidence: float = 0.95)
             est, ref = est_by_n[n], ref_by_n[n]
             usable = wide[est].notna() & wide[ref].notna()
             a, b = wide.loc[usable, est].to_numpy(float), wide.loc[usable, ref].to_numpy(float)
-            ratio, low, high = ratio_interval(b, a, _bootstrap_rng(seed, est, ref), confidence)
+            ratio, low, high = ratio_interval(b, a, confidence)
             time_ratio = float(times[ref] / times[est])
             rows.append(
                 {
@@ -159,13 +144,13 @@ def efficiency_table(metrics: pd.DataFrame, seed: int, confidence: float = 0.95)
 
 
 def read_sweep(sweep_dir: Path) -> list[Job]:
-    """``(Q, metrics, rmse_summary, seed)`` of every job folder of a sweep over ``model.Q``,
+    """``(Q, metrics, rmse_summary)`` of every job folder of a sweep over ``model.Q``,
     sorted by Q (a job is a sub-folder with ``metrics.csv`` and ``config.yaml``)."""
     jobs = []
     for job in sorted(p for p in sweep_dir.iterdir() if (p / "metrics.csv").is_file()):
         record = yaml.safe_load((job / "config.yaml").read_text())
         summary = pd.read_csv(job / "rmse_summary.csv")
-        jobs.append((float(record["model"]["Q"]), pd.read_csv(job / "metrics.csv"), summary, int(record["seed"])))
+        jobs.append((float(record["model"]["Q"]), pd.read_csv(job / "metrics.csv"), summary))
     return sorted(jobs, key=lambda j: j[0])
 
 
@@ -176,7 +161,7 @@ def noise_trend(jobs: list[Job]) -> pd.DataFrame:
     (``rmse_summary.csv``: the truth follows the filter model, so pooled ≥ floor up to Monte
     Carlo error)."""
     frames = []
-    for q, metrics, summary, _ in jobs:
+    for q, metrics, summary in jobs:
         series = particle_count_series(metrics)
         rows = summary[summary["quantity"] == "filter"]
         pooled = rows.groupby("estimator", sort=False)["mse_mean"].mean().pow(0.5).rename("pooled_rmse")
@@ -190,14 +175,14 @@ def noise_change(jobs: list[Job], confidence: float = 0.95) -> pd.DataFrame:
     """Per estimator, the change of its per-run RMSE (averaged over the filter states) from the
     smallest to the largest Q of the sweep: the same seed gives every job the same runs and the
     same standard-normal draws (the process noise is scaled by √Q), so the runs are paired; the
-    mean difference and its relative size with paired bootstrap intervals (:func:`diff_interval`)."""
-    (q_low, low_metrics, _, seed), (q_high, high_metrics, _, _) = jobs[0], jobs[-1]
+    mean difference and its relative size with paired Student-t intervals (:func:`diff_interval`)."""
+    (q_low, low_metrics, _), (q_high, high_metrics, _) = jobs[0], jobs[-1]
     low, high = per_run_rmse(low_metrics), per_run_rmse(high_metrics)
     rows = []
     for est in low.columns:
         usable = low[est].notna() & high[est].notna()
         a, b = high.loc[usable, est].to_numpy(float), low.loc[usable, est].to_numpy(float)
-        d, lo, hi, rel, rlo, rhi = diff_interval(a, b, _bootstrap_rng(seed, est, "Q"), confidence)
+        d, lo, hi, rel, rlo, rhi = diff_interval(a, b, confidence)
         rows.append(
             {
                 "estimator": est, "Q_low": q_low, "Q_high": q_high, "runs": a.size,
@@ -212,15 +197,15 @@ def time_efficiency(jobs: list[Job], confidence: float = 0.95) -> pd.DataFrame:
     """Time-based efficiency with an interval. The time ratio ``t_ref / t_est`` of each pair at
     equal N is measured once per job; the jobs whose estimators were computed (not handed over by
     the result cache) are independent timings, so its mean and Student-t interval come from them.
-    Per job, the error ratio and its bootstrap interval (:func:`efficiency_table`); the product
+    Per job, the error ratio and its interval (:func:`efficiency_table`); the product
     of the two estimates is the time-based ratio ``η_t,est / η_t,ref``, and the product of the two
     intervals, each at level ``1 − (1 − confidence)/2``, covers it with probability at least
     ``confidence`` (Bonferroni)."""
     each = 1.0 - (1.0 - confidence) / 2.0
-    tables = [(q, efficiency_table(metrics, seed, each)) for q, metrics, _, seed in jobs]
+    tables = [(q, efficiency_table(metrics, each)) for q, metrics, _ in jobs]
     fresh = [
         table
-        for (_, table), (_, metrics, _, _) in zip(tables, jobs, strict=True)
+        for (_, table), (_, metrics, _) in zip(tables, jobs, strict=True)
         if not metrics["from_cache"].astype(bool).any()
     ]
     timings = pd.concat(fresh).groupby(["estimator", "reference"])["time_ratio"].agg(["mean", "std", "count"])
@@ -316,8 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = int(series["runs"].max())
     fig = plot_particle_count(series, job_dir / "figures" / FIGURE, f"{job_dir.name}: {runs} runs")
     plt.close(fig)
-    seed = int(metrics["seed"].iloc[0]) if "seed" in metrics.columns else 0
-    efficiency = efficiency_table(metrics, seed)
+    efficiency = efficiency_table(metrics)
     if len(efficiency):
         efficiency.to_csv(job_dir / EFFICIENCY, index=False)
     written = [job_dir / "figures" / FIGURE, job_dir / SERIES] + ([job_dir / EFFICIENCY] if len(efficiency) else [])

@@ -4,7 +4,7 @@
 Ranking. Per run, the 3-D position and velocity RMSE (root of the sum of the three axes' mean
 squares) and the attitude error angle's RMSE (``error_angle``), then the job's own paired
 comparison (:func:`quadest.evaluation.paired.paired_comparison` on these three grouped states: paired
-bootstrap CI, Wilcoxon, Holm over every pair of the job's estimators × the three states) for each
+Student-t and Fieller CIs, Wilcoxon, Holm over every pair of the job's estimators × the three states) for each
 step of :data:`STEPS`. A step *holds* when its Holm-corrected Wilcoxon p is below 0.05 and the
 better-ranked filter has the smaller RMSE, is *reversed* when p < 0.05 the other way, and is
 *not shown* otherwise.
@@ -67,7 +67,7 @@ def grouped_metrics(metrics: pd.DataFrame) -> pd.DataFrame:
 def grouped_paired(metrics: pd.DataFrame) -> pd.DataFrame:
     """The paired comparison (every pair of the job's estimators, in the job's order) of the grouped
     states of :func:`grouped_metrics`, with Holm over its rows."""
-    return paired_comparison(grouped_metrics(metrics), seed=int(metrics["seed"].iloc[0]))
+    return paired_comparison(grouped_metrics(metrics))
 
 
 def ranking_lines(metrics: pd.DataFrame, table: pd.DataFrame | None = None) -> list[str]:

@@ -68,7 +68,7 @@ def timing_table(cells: pd.DataFrame) -> pd.DataFrame:
 def paired_summary(paired: pd.DataFrame, params: list[str]) -> pd.DataFrame:
     """Per cell and pair of estimators: how many filter states differ at Holm-adjusted Wilcoxon
     p < 0.05 (Holm over the cell's pairs × states), and the state with the smallest adjusted p
-    with its relative difference and paired-bootstrap 95 % CI in percent."""
+    with its relative difference and its 95 % Fieller CI in percent."""
     if paired.empty:
         return pd.DataFrame()
     rows = []

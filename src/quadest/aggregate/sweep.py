@@ -150,8 +150,7 @@ def load_paired(sweep_dir: Path, jobs: pd.DataFrame, params: list[str]) -> pd.Da
         if path.is_file():
             table = pd.read_csv(path)
         else:
-            seed = json.loads((job_dir / "summary.json").read_text())["labels"]["seed"]
-            table = paired_comparison(pd.read_csv(job_dir / "metrics.csv"), seed=int(seed))
+            table = paired_comparison(pd.read_csv(job_dir / "metrics.csv"))
         if table.empty:
             continue
         table.insert(0, "job", int(row["job"]))

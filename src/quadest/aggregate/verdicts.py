@@ -15,7 +15,7 @@ With our estimate and its 95 % confidence interval [low, high] the verdict is
   wholly outside the window, or away from ``x``);
 - *inconclusive*: neither. The ledger then gives the number of runs the observed effect would need
   to decide, from the interval's half-width shrinking as 1/√n (the normal approximation every
-  interval of the job outputs shares: Student t, paired bootstrap): with n runs, an estimate at
+  interval of the job outputs shares: Student t, Fieller): with n runs, an estimate at
   distance d from the nearest decision boundary and the half-width h of the interval on that side,
   the interval clears the boundary at n' = ⌈n (h / d)²⌉. When it is the test that fails (the interval
   is on the claim's side), n' is where the observed z-score, z ∝ √n, reaches the first Holm step,

@@ -87,8 +87,8 @@ def _main(cfg: DictConfig) -> float | None:
               f"{_fmt(est['step_time_us'], 1)} us/step/run"
               f"{' (from the cache)' if est['from_cache'] else ''}")  # fmt: skip
     if summary["_paired"]:
-        print("\nPaired differences of per-run RMSE, estimator - reference, in % of the reference with the paired "
-              "bootstrap 95% CI\n(paired_comparison.csv; Holm over all pairs x states; runs diverged in either "
+        print("\nPaired differences of per-run RMSE, estimator - reference, in % of the reference with the 95% "
+              "Fieller CI\n(paired_comparison.csv; Holm over all pairs x states; runs diverged in either "
               "excluded):")  # fmt: skip
         for line in summary["_paired"]:
             print(f"  {line}")

@@ -116,7 +116,7 @@ class ClosedLoopJob:
             pcrlb, pcrlb_note = finished.derived("pcrlb", lambda: pcrlb_variances(data)), None
         control_summary = write_control_tables(out_dir, control_table(flights, runs, mode))
         labels = {"seed": int(cfg.seed), "runs": runs, "loop": mode}
-        tables = metric_tables(results, data, finished.rows.params, labels, pcrlb, int(cfg.seed), cfg.metrics)
+        tables = metric_tables(results, data, finished.rows.params, labels, pcrlb, cfg.metrics)
         arrays = {}
         if saved:
             arrays = self._series(data, flights, results, saved)

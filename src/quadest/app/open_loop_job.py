@@ -46,7 +46,7 @@ class OpenLoopJob:
         results = finished.rows.results
         bound = finished.derived("pcrlb", lambda: pcrlb_variances(data))
         labels = {"seed": int(cfg.seed), "runs": int(cfg.runs)}
-        tables = metric_tables(results, data, finished.rows.params, labels, bound, int(cfg.seed), cfg.metrics)
+        tables = metric_tables(results, data, finished.rows.params, labels, bound, cfg.metrics)
         if data.model.bias_states:
             convergence_table(results, data).to_csv(out_dir / "convergence.csv", index=False)
         arrays = {}

@@ -232,7 +232,7 @@ class ReplayJob(OpenLoopJob):
             warnings.simplefilter("ignore", RuntimeWarning)
             overview = estimator_overview(results, data.model, truth=False)
         printed = _printed(summary_table)
-        paired = paired_comparison(table, int(cfg.seed))
+        paired = paired_comparison(table)
         tables = MetricTables(table, summary_table, overview, printed, paired, preamble=caption(data, results) + "\n\n",
                               further=further_measures(summary_table, overview))  # fmt: skip
         ref_angles = euler_deg(reference)

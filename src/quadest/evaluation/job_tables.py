@@ -66,7 +66,6 @@ def metric_tables(
     params: dict[str, dict],
     labels: dict,
     bound: np.ndarray,
-    seed: int,
     settings: MetricsConf | None = None,
 ) -> MetricTables:
     """The metric tables of a job whose results are errors against a truth (open and closed loop).
@@ -84,7 +83,7 @@ def metric_tables(
         overview = estimator_overview(results, data.model)
     printed = rmse_table(summary)
     further = further_measures(summary, overview)
-    return MetricTables(table, summary, overview, printed, paired_comparison(table, seed), further=further)
+    return MetricTables(table, summary, overview, printed, paired_comparison(table), further=further)
 
 
 def further_measures(summary: pd.DataFrame, overview: pd.DataFrame) -> str:

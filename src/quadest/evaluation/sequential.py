@@ -28,8 +28,8 @@ large-sample variance of the ratio estimator, from the sample residuals ``e_i = 
     r̂ ± t_{n−1, 1−Δα/2} · s_e / (√n · R̄)
 
 with ``s_e`` the sample standard deviation of the ``e_i`` and Student's quantile for n − 1 degrees
-of freedom. The paired bootstrap of ``paired_comparison.csv`` cannot serve here: at the first looks
-``Δα`` is of order 1e-9, far beyond the tail a few thousand resamples resolve.
+of freedom (:mod:`quadest.evaluation.intervals`; ``paired_comparison.csv`` uses the same interval
+at 95 %).
 
 Verdict of a comparison at a look (``margin`` m in %): *better* if the interval lies below 0,
 *worse* if above 0, *equivalent* if it lies inside ``[−m, m]`` (the interval-inclusion form of equivalence testing,
@@ -56,6 +56,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
+
+from quadest.evaluation.intervals import ratio_and_half_width
 
 BETTER, WORSE, EQUIVALENT, UNDECIDED = "better", "worse", "equivalent", "undecided"
 
@@ -99,15 +101,10 @@ def relative_difference_interval(d: np.ndarray, reference: np.ndarray, miss: flo
     reference's RMSE); with fewer than two runs or a reference mean of 0 otherwise, NaN.
     """
     d, reference = np.atleast_2d(np.asarray(d, float)), np.atleast_2d(np.asarray(reference, float))
-    n = d.shape[0]
-    nan = np.full(d.shape[1], np.nan)
-    if n < 2:
+    if d.shape[0] < 2:
+        nan = np.full(d.shape[1], np.nan)
         return Interval(nan, nan.copy(), nan.copy())
-    mean_d, mean_ref = d.mean(axis=0), reference.mean(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = mean_d / mean_ref
-        residual = d - ratio * reference
-        half = stats.t.isf(miss / 2.0, n - 1) * residual.std(axis=0, ddof=1) / (np.sqrt(n) * np.abs(mean_ref))
+    ratio, half = ratio_and_half_width(d, reference, miss)
     zero = ~d.any(axis=0)
     estimate = np.where(zero, 0.0, 100.0 * ratio)
     half = np.where(zero, 0.0, 100.0 * half)
