@@ -39,8 +39,10 @@ hydra:
 """
 
 
-def run_two_cells(tmp_path: Path, launcher_overrides: list[str], env: dict[str, str] | None = None) -> Path:
-    (tmp_path / "two_cells.yaml").write_text(TWO_CELLS)
+def sweep_two_cells(
+    tmp_path: Path, launcher_overrides: list[str], env: dict[str, str] | None = None, text: str = TWO_CELLS
+) -> tuple[subprocess.CompletedProcess, Path]:
+    (tmp_path / "two_cells.yaml").write_text(text)
     out = tmp_path / "sweep"
     proc = subprocess.run(
         [
@@ -60,6 +62,11 @@ def run_two_cells(tmp_path: Path, launcher_overrides: list[str], env: dict[str, 
         timeout=180,
         env=env,
     )
+    return proc, out
+
+
+def run_two_cells(tmp_path: Path, launcher_overrides: list[str], env: dict[str, str] | None = None) -> Path:
+    proc, out = sweep_two_cells(tmp_path, launcher_overrides, env)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "Aggregated:" in proc.stdout
     # each cell ran as a submitit job: submitit's own folder holds one result pickle per job
@@ -125,7 +132,9 @@ echo "JobID|State|NodeList"
 """
 
 
-def test_slurm_launcher_submits_an_array_with_the_documented_resources(tmp_path):
+def fake_slurm(tmp_path: Path) -> tuple[dict[str, str], Path]:
+    """An environment whose ``sbatch``, ``srun`` and ``sacct`` are the stand-ins, and the file
+    where the stand-in ``sbatch`` records the script it was given."""
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     for name, text in (("sbatch", FAKE_SBATCH), ("srun", FAKE_SRUN), ("sacct", FAKE_SACCT)):
@@ -133,8 +142,15 @@ def test_slurm_launcher_submits_an_array_with_the_documented_resources(tmp_path)
         (bin_dir / name).chmod(0o755)
     record = tmp_path / "sbatch_script.sh"
     env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}", FAKE_SLURM_RECORD=str(record))
-    overrides = ["hydra/launcher=slurm", "hydra.launcher.partition=debug", "hydra.launcher.array_parallelism=1"]
-    run_two_cells(tmp_path, overrides, env=env)
+    return env, record
+
+
+SLURM = ["hydra/launcher=slurm", "hydra.launcher.partition=debug", "hydra.launcher.array_parallelism=1"]
+
+
+def test_slurm_launcher_submits_an_array_with_the_documented_resources(tmp_path):
+    env, record = fake_slurm(tmp_path)
+    run_two_cells(tmp_path, SLURM, env=env)
     script = record.read_text().splitlines()
     for line in (
         "#SBATCH --array=0-1%1",  # one task per cell, at most array_parallelism at once
@@ -145,3 +161,18 @@ def test_slurm_launcher_submits_an_array_with_the_documented_resources(tmp_path)
         "export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1",
     ):
         assert line in script, line
+
+
+def test_a_slurm_sweep_with_a_failed_cell_exits_with_the_sweep_failed_status(tmp_path):
+    """The cells run as array tasks in other processes (on a cluster, other nodes): the one whose
+    value is refused inside the job still makes the submitting ``quadest`` exit 3 with one line,
+    and the finished cell is kept. The cells' records are in the sweep folder, the one place a
+    cluster's nodes share with the submitting process (not its ``/tmp``)."""
+    env, _ = fake_slurm(tmp_path)
+    failing = TWO_CELLS.replace("sweep.alpha: 0.5,1.0", "estimator.srukf.smoother: none,bogus")
+    proc, out = sweep_two_cells(tmp_path, ["-m", *SLURM], env=env, text=failing)
+    assert proc.returncode == 3, proc.stderr[-3000:]
+    assert "quadest: 1 of 2 sweep cells failed" in proc.stderr
+    assert (out / "0" / "metrics.csv").is_file()
+    assert '"status": "failed"' in (out / "1" / "summary.json").read_text()
+    assert (out / ".quadest-cells" / "1").read_text().startswith("failed ")

@@ -19,7 +19,6 @@ import math
 import os
 import re
 import sys
-import tempfile
 from pathlib import Path
 
 import hydra
@@ -31,6 +30,7 @@ from hydra.core.override_parser.types import ValueType
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from quadest.app.cell_record import failed_cells, record_cell
 from quadest.app.job import run_validated
 from quadest.app.parent_watch import watch_parent
 from quadest.app.schema import register_schemas
@@ -68,7 +68,7 @@ def _main(cfg: DictConfig) -> float | None:
         _record_failure(out_dir, f"{type(exc).__name__}: {exc}")
         return failed
     if multirun:
-        _record_cell(f"ok {out_dir}")
+        record_cell("ok", out_dir)
     runs = summary.get("labels", {}).get("runs", cfg.runs)  # runs=auto: the runs it made
     print(f"\n{summary['_caption']}")  # quadest.evaluation.captions
     print(summary["_table"].to_string(index=False))
@@ -112,30 +112,19 @@ def _record_failure(out_dir: Path, reason: str) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(strict_json({"status": "failed", "error": reason}, indent=2))
     print(f"quadest: job failed: {reason}", file=sys.stderr)
-    _record_cell(f"failed {out_dir}")
+    record_cell("failed", out_dir)
 
-
-CELLS_RECORD = "QUADEST_SWEEP_CELLS"
-"""The environment variable naming the file where a sweep's cells, in whichever process a launcher
-runs them, append ``ok DIR`` or ``failed DIR`` (:func:`main` reads it when the sweep ends)."""
 
 SWEEP_FAILED = 3
 """The exit status of a sweep in which any cell failed (its finished cells are kept)."""
 
 
-def _record_cell(line: str) -> None:
-    record = os.environ.get(CELLS_RECORD)
-    if record:
-        with open(record, "a") as f:
-            f.write(line + "\n")
-
-
-def _exit_if_cells_failed(record: Path) -> None:
-    """After a sweep: exit with :data:`SWEEP_FAILED` and one line if any cell failed."""
-    lines = record.read_text().splitlines() if record.is_file() else []
-    failed = [line.split(" ", 1)[1] for line in lines if line.startswith("failed ")]
+def _exit_if_cells_failed() -> None:
+    """After a sweep: exit with :data:`SWEEP_FAILED` and one line if any cell failed
+    (:mod:`quadest.app.cell_record`, whichever launcher ran the cells)."""
+    failed, cells = failed_cells()
     if failed:
-        print(f"quadest: {len(failed)} of {len(lines)} sweep cells failed (each one's summary.json says why): "
+        print(f"quadest: {len(failed)} of {cells} sweep cells failed (each one's summary.json says why): "
               f"{', '.join(failed)}", file=sys.stderr)  # fmt: skip
         sys.exit(SWEEP_FAILED)
 
@@ -332,11 +321,8 @@ def main() -> None:
     argv, primary = one_way(sys.argv[1:])
     precheck(argv if primary is None else argv[4:], primary)
     sys.argv[1:] = argv
-    with tempfile.TemporaryDirectory(prefix="quadest-cells-") as folder:
-        record = Path(folder) / "cells"
-        os.environ[CELLS_RECORD] = str(record)
-        _main()
-        _exit_if_cells_failed(record)
+    _main()
+    _exit_if_cells_failed()
 
 
 if __name__ == "__main__":
