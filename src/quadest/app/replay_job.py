@@ -22,6 +22,18 @@ difference (degrees, over the same window) of every other row and of PX4's own e
 smoothed row, that is how far each online filter is from the best estimate these measurements
 allow under our models; and ``figures/difference_to_smoothed.png``. ``summary.json`` holds the
 same numbers under ``difference_to_smoothed``.
+
+Our filters' yaw is magnetic, PX4's true: every filter's estimate is turned by the log's
+declination (:mod:`quadest.replay.declination`) before any comparison, and the saved estimates and
+angles are the turned ones. The caption and ``summary.json`` (``declination``) say by how much and
+where it came from.
+
+Errors against the truth, where the log has one (SITL: ``vehicle_attitude_groundtruth``):
+``truth_errors.csv`` (``estimator, state, unit, rms``), the RMS error in degrees over the compared
+window of every row *and* of PX4's own estimate (``px4``), in roll, pitch, yaw and the attitude
+error angle on SO(3) (:func:`quadest.models.attitude.attitude_errors_deg`); printed below the
+table, in ``summary.json`` (``truth_errors``) and ``timeseries.npz`` (``ground_truth``,
+``ground_truth_angles_deg``). Without a ground truth, the caption says so and no file is written.
 """
 
 from __future__ import annotations
@@ -49,6 +61,9 @@ from quadest.models.attitude import attitude_errors_deg
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
 from quadest.numerics import quaternion as quat
+from quadest.replay.data import ReplayData
+from quadest.replay.declination import to_true_north
+from quadest.replay.ulog import ATTITUDE_TRUTH, POSITION_TRUTH
 
 ANGLES = ("roll", "pitch", "yaw")
 QUANTITY = "difference to PX4"
@@ -58,6 +73,9 @@ on SO(3) (:func:`quadest.models.attitude.attitude_errors_deg`)."""
 ROW_ORDER = [1, 2, 3, 0]
 """Where each of :data:`ROWS` is in :func:`~quadest.models.attitude.attitude_errors_deg`'s output."""
 PX4 = "PX4 onboard estimate"
+PX4_ROW = "px4"
+"""PX4's own estimate as a row of ``truth_errors.csv``."""
+TRUTH_COLUMNS = ["estimator", "state", "unit", "rms"]
 SMOOTHED = "+smoothed"
 NOT_APPLICABLE = (
     "NEES and PCRLB are not reported: they need the true state, and a flight log has none "
@@ -133,6 +151,41 @@ def difference_to_smoothed(angles: dict[str, np.ndarray], references: list[str],
     return pd.DataFrame(lines, columns=["reference", "estimator", "state", "unit", "rms_difference"])
 
 
+def truth_errors(estimates: dict[str, np.ndarray], truth: np.ndarray, window: np.ndarray) -> pd.DataFrame:
+    """The RMS error in degrees against ``truth`` (K+1, 4) over the steps of ``window`` where the
+    truth is defined, of every state sequence (K+1, ≥ 4) of ``estimates`` (name → states whose
+    first four entries are the body→NED quaternion): one line per name and state of :data:`ROWS`
+    (roll, pitch, yaw, attitude angle); NaN where a row diverged."""
+    compared = window & np.isfinite(truth).all(axis=-1)
+    lines = []
+    for name, states in estimates.items():
+        errors = attitude_errors_deg(states, truth)[:, ROW_ORDER]
+        rms = rms_difference(errors, compared) if compared.any() else np.full(len(ROWS), np.nan)
+        lines += [{"estimator": name, "state": state, "unit": unit, "rms": float(value)}
+                  for (_, state, unit), value in zip(ROWS, rms, strict=True)]  # fmt: skip
+    return pd.DataFrame(lines, columns=TRUTH_COLUMNS)
+
+
+def _truth_markdown(table: pd.DataFrame, data: MonteCarloData) -> str:
+    """State × row, the RMS error against the ground truth in degrees."""
+    wide = table.pivot_table(index="state", columns="estimator", values="rms", sort=False)
+    wide.columns.name = None
+    cells = wide.map(lambda v: "diverged" if np.isnan(v) else f"{v:.3f}").reset_index()
+    start = data.time[0] + data.labels["warmup"]
+    return (f"RMS error against the ground truth ({ATTITUDE_TRUTH}) of every filter and of PX4's estimate "
+            f"({PX4_ROW}), degrees, from t = {start:g} s:\n\n{markdown_table(cells)}\n")  # fmt: skip
+
+
+def truth_line(data: ReplayData) -> str:
+    """The caption's line on the log's ground truth."""
+    if data.ground_truth is not None:
+        return f"Ground truth: {ATTITUDE_TRUTH}; errors against it in truth_errors.csv."
+    if data.position_truth:
+        return (f"The log has {POSITION_TRUTH} but no {ATTITUDE_TRUTH}: the attitude replay has no state to compare "
+                "with it (no truth_errors.csv).")  # fmt: skip
+    return f"The log has no ground truth ({ATTITUDE_TRUTH}): differences to PX4 only, no truth_errors.csv."
+
+
 def wrap_deg(angle: np.ndarray) -> np.ndarray:
     """Angles in degrees wrapped to [−180, 180)."""
     return (angle + 180.0) % 360.0 - 180.0
@@ -149,15 +202,17 @@ def _difference_markdown(table: pd.DataFrame) -> str:
     return "\n".join(blocks)
 
 
-def caption(data: MonteCarloData, results: list[EstimatorResult]) -> str:
+def caption(data: ReplayData, results: list[EstimatorResult]) -> str:
     """The lines printed above the table (:func:`~quadest.evaluation.captions.table_caption`; a
-    replay has no PCRLB column, :data:`NOT_APPLICABLE` says why)."""
+    replay has no PCRLB column, :data:`NOT_APPLICABLE` says why), then the declination applied to
+    our filters' yaw and whether the log has a ground truth."""
     lab = data.labels
     head = (
         f"RMS difference to the {lab['reference']} (vehicle_attitude) of {lab['log']}, degrees, from "
         f"t = {data.time[0] + lab['warmup']:g} s to {data.time[-1]:.1f} s (one log: no Monte Carlo spread)."
     )
-    return table_caption(head, lab["model"], results, NOT_APPLICABLE)
+    turned = f"Our filters' yaw turned from magnetic to true north by the declination: {data.declination.note}."
+    return table_caption(head, lab["model"], results, NOT_APPLICABLE, (turned, truth_line(data)))
 
 
 def plot_replay(data: MonteCarloData, angles: dict[str, np.ndarray], reference: np.ndarray, fig_dir: Path) -> None:
@@ -219,8 +274,9 @@ class ReplayJob(OpenLoopJob):
         results = finished.rows.results
         reference = data.truth[0]
         window = data.time >= data.time[0] + data.labels["warmup"]
+        turned = {res.name: to_true_north(res.saved["estimate"], data.declination.deg) for res in results}
         # roll, pitch, yaw of the estimate minus PX4's, wrapped to ±180° (NaN once a run diverged)
-        diffs = {res.name: attitude_errors_deg(res.saved["estimate"][0], reference)[:, ROW_ORDER] for res in results}
+        diffs = {name: attitude_errors_deg(est[0], reference)[:, ROW_ORDER] for name, est in turned.items()}
         labels = {**data.labels, "seed": int(cfg.seed), "runs": 1}
         table = metric_rows(results, data.model, params, labels, ROWS, _state_values(diffs, window))
         summary_table = summarize(table).assign(pooled_rmse=lambda s: s["rmse_mean"], pcrlb=np.nan)
@@ -236,14 +292,20 @@ class ReplayJob(OpenLoopJob):
         tables = MetricTables(table, summary_table, overview, printed, paired, preamble=caption(data, results) + "\n\n",
                               further=further_measures(summary_table, overview))  # fmt: skip
         ref_angles = euler_deg(reference)
-        angles = {res.name: euler_deg(res.saved["estimate"][0]) for res in results}
+        angles = {name: euler_deg(est[0]) for name, est in turned.items()}
         arrays = {"time": data.time, "reference": reference, "reference_angles_deg": ref_angles}
         for res in results:
-            arrays[f"{res.name}/estimate"] = res.saved["estimate"]
+            arrays[f"{res.name}/estimate"] = turned[res.name]
             arrays[f"{res.name}/std"] = res.saved["std"]
             arrays[f"{res.name}/angles_deg"] = angles[res.name]
         offline = [res.name for res in offline_references(finished.results)]
         to_smoothed = difference_to_smoothed({**angles, PX4: ref_angles}, offline, window)
+        to_truth = None
+        if data.ground_truth is not None:
+            to_truth = truth_errors({**{n: e[0] for n, e in turned.items()}, PX4_ROW: reference}, data.ground_truth,
+                                    window)  # fmt: skip
+            to_truth.to_csv(finished.out_dir / "truth_errors.csv", index=False)
+            arrays["ground_truth"], arrays["ground_truth_angles_deg"] = data.ground_truth, euler_deg(data.ground_truth)
         if offline:
             to_smoothed.to_csv(finished.out_dir / "difference_to_smoothed.csv", index=False)
             (finished.out_dir / "difference_to_smoothed.md").write_text(_difference_markdown(to_smoothed))
@@ -263,6 +325,12 @@ class ReplayJob(OpenLoopJob):
             "state_names": list(ANGLES),
             "companion_names": [],
             "measurement_names": list(data.model.measurement_names),
+            "declination": {"deg": data.declination.deg, "source": data.declination.source,
+                            "note": data.declination.note},
+            "ground_truth": truth_line(data),
+            "truth_errors": None if to_truth is None else {
+                name: dict(zip(part["state"], part["rms"], strict=True))
+                for name, part in to_truth.groupby("estimator", sort=False)},
         }  # fmt: skip
         if offline:
             fields["difference_to_smoothed"] = {
@@ -270,5 +338,6 @@ class ReplayJob(OpenLoopJob):
                             for name, part in by_reference.groupby("estimator", sort=False)}
                 for reference, by_reference in to_smoothed.groupby("reference", sort=False)
             }  # fmt: skip
-        after = _difference_markdown(to_smoothed) if offline else None
-        return Report(tables, fields, arrays, caption(data, results), after)
+        after = [_truth_markdown(to_truth, data)] if to_truth is not None else []
+        after += [_difference_markdown(to_smoothed)] if offline else []
+        return Report(tables, fields, arrays, caption(data, results), "\n".join(after) or None)

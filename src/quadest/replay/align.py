@@ -14,7 +14,9 @@ the magnetometer at its own rate, and its attitude estimate at about 100 Hz. On 
 - **magnetometer (a further sensor)**: available at step ``k`` when a new sample falls in
   ``(t_{k-1}, t_k]``; its value is the last such sample (time error below ``T``);
 - **PX4's estimate (the reference)**: spherical linear interpolation (slerp, Shoemake 1985) of
-  ``vehicle_attitude.q`` at ``t_k``.
+  ``vehicle_attitude.q`` at ``t_k``;
+- **the simulator's truth** (SITL logs): the same slerp of ``vehicle_attitude_groundtruth.q``, at
+  the grid times inside its span (NaN outside).
 
 Across a logging dropout the linear interpolation bridges the gap; :attr:`AlignedLog.gaps` counts
 them (intervals longer than 1.5 T) so the docs can say how much of a log was bridged.
@@ -43,6 +45,8 @@ class AlignedLog:
         mag: (K+1, 3) latest magnetometer sample in ``(t_{k-1}, t_k]`` (NaN where none).
         mag_available: (K+1,) bool.
         reference_q: (K+1, 4) PX4's attitude at ``t_k``, scalar first, body FRD → earth NED.
+        truth_q: (K+1, 4) the simulator's attitude at ``t_k`` (NaN outside its span), or ``None``
+            when the log has no ground truth.
         gaps: number of IMU intervals longer than 1.5 T inside the grid's span.
         longest_gap: the longest IMU interval inside the span, seconds.
     """
@@ -55,6 +59,7 @@ class AlignedLog:
     reference_q: np.ndarray
     gaps: int
     longest_gap: float
+    truth_q: np.ndarray | None = None
 
 
 def common_span(log: FlightLog) -> tuple[float, float]:
@@ -81,8 +86,13 @@ def align(log: FlightLog, period: float, start: float = 0.0, duration: float = f
     gyro_mean = np.diff(_interp(t, log.imu_time, _integrated(log.imu_time, log.gyro)), axis=0) / period
     accel = _interp(t, log.accel_time, log.accel)
     mag, available = _latest_in_interval(t, log.mag_time, log.mag)
-    ref = Slerp(log.reference_time, Rotation.from_quat(log.reference_q[:, [1, 2, 3, 0]]))(t).as_quat()[:, [3, 0, 1, 2]]
-    ref *= np.sign(ref[:, :1] + (ref[:, :1] == 0))  # scalar part ≥ 0: one sign per attitude
+    ref = _slerp(t, log.reference_time, log.reference_q)
+    truth = None
+    if log.truth_q is not None:
+        inside_truth = (t >= log.truth_time[0]) & (t <= log.truth_time[-1])
+        truth = np.full((t.size, 4), np.nan)
+        if inside_truth.any():
+            truth[inside_truth] = _slerp(t[inside_truth], log.truth_time, log.truth_q)
     inside = (log.imu_time >= t[0]) & (log.imu_time <= t[-1])
     intervals = np.diff(log.imu_time[inside])
     return AlignedLog(
@@ -94,7 +104,15 @@ def align(log: FlightLog, period: float, start: float = 0.0, duration: float = f
         reference_q=ref,
         gaps=int(np.sum(intervals > 1.5 * period)),
         longest_gap=float(intervals.max(initial=0.0)),
+        truth_q=truth,
     )
+
+
+def _slerp(t: np.ndarray, times: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``q`` (scalar first) at ``times`` slerped at ``t``, scalar part ≥ 0 (one
+    sign per attitude)."""
+    out = Slerp(times, Rotation.from_quat(q[:, [1, 2, 3, 0]]))(t).as_quat()[:, [3, 0, 1, 2]]
+    return out * np.sign(out[:, :1] + (out[:, :1] == 0))
 
 
 def _interp(t: np.ndarray, times: np.ndarray, values: np.ndarray) -> np.ndarray:

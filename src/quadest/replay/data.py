@@ -24,14 +24,18 @@ aligned log (:mod:`quadest.replay.align`), in PX4's frames (body FRD, earth NED)
   the magnetometer; zero biases), never from PX4's estimate;
 - ``truth``: PX4's attitude as a filter state with zero biases (PX4 does not log its bias
   estimates). It is a *reference*, labelled ``reference: PX4 onboard
-  estimate``; only its attitude is compared (:mod:`quadest.app.replay_job`).
+  estimate``; only its attitude is compared (:mod:`quadest.app.replay_job`);
+- beside them (:class:`ReplayData`): the simulator's attitude where the log has one (SITL's
+  ``vehicle_attitude_groundtruth``), the truth both PX4's estimate and ours are scored against, and
+  the log's magnetic declination (:mod:`quadest.replay.declination`), which turns our filters'
+  magnetic yaw to PX4's true north before any comparison.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +51,7 @@ from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.streams import run_seed_sequences
 from quadest.numerics import quaternion as quat
 from quadest.replay.align import AlignedLog, align, common_span
+from quadest.replay.declination import Declination, log_declination
 from quadest.replay.ulog import incomplete_tail, read_flight_log
 from quadest.sensors.mimu import TriadSpec
 from quadest.sensors.record import SensorRecord
@@ -62,6 +67,22 @@ def shipped_log() -> Path:
         if (candidate / "sample.ulg").is_file():
             return candidate / "sample.ulg"
     raise FileNotFoundError(f"the shipped PX4 log is missing from {_PACKAGE / 'data/px4'}; reinstall quadest")
+
+
+@dataclass
+class ReplayData(MonteCarloData):
+    """A replay's Monte Carlo data and what the report needs besides it.
+
+    Attributes:
+        ground_truth: (K+1, 4) the simulator's body→NED quaternion on the grid (NaN outside its
+            span), or ``None``: the log has no ``vehicle_attitude_groundtruth``.
+        position_truth: whether the log has ``vehicle_local_position_groundtruth``.
+        declination: applied to our filters' yaw before every comparison.
+    """
+
+    ground_truth: np.ndarray | None = None
+    position_truth: bool = False
+    declination: Declination = field(default_factory=lambda: log_declination({}, ()))
 
 
 @dataclass
@@ -177,7 +198,7 @@ def replay_noise(
     return Q, R_acc, R_mag, P0
 
 
-def build_replay_data(settings: DataSettings) -> MonteCarloData:
+def build_replay_data(settings: DataSettings) -> ReplayData:
     """Read ``source.path``, align it to ``sample_period`` and bind the attitude model to it
     (``settings`` validated, :func:`validate_replay` included)."""
     path = log_path(settings.source.path)
@@ -195,7 +216,7 @@ def build_replay_data(settings: DataSettings) -> MonteCarloData:
         "model": "attitude", "source": "px4", "log": path.name, "layout": log.layout, "reference": REFERENCE,
         "warmup": float(settings.source.warmup), "bridged_gaps": aligned.gaps, "longest_gap": aligned.longest_gap,
     }  # fmt: skip
-    return MonteCarloData(
+    return ReplayData(
         model=model,
         time=aligned.time,
         truth=reference[None],
@@ -208,4 +229,7 @@ def build_replay_data(settings: DataSettings) -> MonteCarloData:
         estimator_seeds=run_seed_sequences(int(settings.seed), 1)["estimator"],
         labels=labels,
         sensors={"mag": SensorRecord(np.nan_to_num(aligned_uT.mag)[None], aligned.mag_available)},
+        ground_truth=aligned.truth_q,
+        position_truth=log.position_truth,
+        declination=log_declination(log.parameters, log.parameter_changes),
     )

@@ -10,6 +10,12 @@ Two message layouts occur in real logs (PX4 uORB message definitions, ``msg/*.ms
   ``sensor_mag`` (``x, y, z``) in logs without it; the GPS is ``vehicle_gps_position`` or
   ``sensor_gps``.
 
+A simulation (SITL) log also records the simulator's truth: ``vehicle_attitude_groundtruth``
+(``q[0..3]`` as in ``vehicle_attitude``) and ``vehicle_local_position_groundtruth``. The log's
+parameters (their values at the start, ``initial_parameters``, and the changes logged during the
+flight, ``changed_parameters``) come along for the magnetic declination
+(:mod:`quadest.replay.declination`).
+
 Units and frames as PX4 logs them: gyro rad/s and accelerometer m/s² (specific force) in the body
 frame FRD, magnetometer gauss in FRD, attitude ``vehicle_attitude.q[0..3]`` (w, x, y, z) rotating
 body FRD to earth NED, GPS velocity m/s in NED. Timestamps are integers in µs of the autopilot's
@@ -22,7 +28,7 @@ The reader works on anything shaped like ``pyulog.ULog`` (``data_list`` of items
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +40,8 @@ RELATIVE_TIMESTAMP_INVALID = 2147483647
 
 _MAG_TOPICS = ("vehicle_magnetometer", "sensor_mag")
 _GPS_TOPICS = ("vehicle_gps_position", "sensor_gps")
+ATTITUDE_TRUTH = "vehicle_attitude_groundtruth"
+POSITION_TRUTH = "vehicle_local_position_groundtruth"
 
 
 class MissingTopicError(ConfigError):
@@ -60,6 +68,11 @@ class FlightLog:
         reference_time, reference_q: PX4's onboard attitude estimate ``vehicle_attitude``,
             (R,) and (R, 4) scalar-first unit quaternions, body FRD → earth NED.
         gps_time, gps_velocity: (G,) and (G, 3) m/s NED, or ``None`` when the log has no GPS topic.
+        truth_time, truth_q: the simulator's attitude ``vehicle_attitude_groundtruth``, (S,) and
+            (S, 4) like ``reference_q``, or ``None`` when the log has none (a real flight).
+        position_truth: whether the log holds ``vehicle_local_position_groundtruth``.
+        parameters: name → value of the log's parameters at its start.
+        parameter_changes: ``(time [s], name, value)`` of each parameter change logged in flight.
     """
 
     path: str
@@ -74,6 +87,11 @@ class FlightLog:
     reference_q: np.ndarray
     gps_time: np.ndarray | None = None
     gps_velocity: np.ndarray | None = None
+    truth_time: np.ndarray | None = None
+    truth_q: np.ndarray | None = None
+    position_truth: bool = False
+    parameters: dict[str, float] = field(default_factory=dict)
+    parameter_changes: tuple[tuple[float, str, float], ...] = ()
 
 
 def read_flight_log(path: str | Path) -> FlightLog:
@@ -83,7 +101,7 @@ def read_flight_log(path: str | Path) -> FlightLog:
     path = str(path)
     if not Path(path).is_file():
         raise ConfigError("source.path", path, "an existing PX4 ULog file (.ulg)")
-    topics = ["sensor_combined", "vehicle_attitude", *_MAG_TOPICS, *_GPS_TOPICS]
+    topics = ["sensor_combined", "vehicle_attitude", *_MAG_TOPICS, *_GPS_TOPICS, ATTITUDE_TRUTH, POSITION_TRUTH]
     try:
         ulog = ULog(path, topics)
     except Exception as exc:  # pyulog raises bare exceptions on a file that is not a ULog
@@ -129,12 +147,25 @@ def flight_log_from(ulog, path: str = "<log>") -> FlightLog:
         gps_time = _seconds(_sample_stamps(topics[gps]))
         gps_velocity = np.column_stack([topics[gps][f"vel_{a}_m_s"] for a in "ned"]).astype(float)
     reference_time = _seconds(_sample_stamps(att))
+    truth_time = truth_q = None
+    if ATTITUDE_TRUTH in topics and len(topics[ATTITUDE_TRUTH]["timestamp"]):
+        truth_time = _seconds(_sample_stamps(topics[ATTITUDE_TRUTH]))
+        truth_q = _unit(_vector(topics[ATTITUDE_TRUTH], "q", path, ATTITUDE_TRUTH, 4))
+    changes = tuple(
+        (float(t) * 1e-6, str(name), float(value)) for t, name, value in getattr(ulog, "changed_parameters", ())
+    )
     return FlightLog(
         path=path, layout=layout, imu_time=imu_time, gyro=gyro, accel_time=accel_time, accel=accel,
-        mag_time=mag_time, mag=mag, reference_time=reference_time,
-        reference_q=reference_q / np.linalg.norm(reference_q, axis=1)[:, None], gps_time=gps_time,
-        gps_velocity=gps_velocity,
+        mag_time=mag_time, mag=mag, reference_time=reference_time, reference_q=_unit(reference_q),
+        gps_time=gps_time, gps_velocity=gps_velocity, truth_time=truth_time, truth_q=truth_q,
+        position_truth=POSITION_TRUTH in topics,
+        parameters={str(k): float(v) for k, v in getattr(ulog, "initial_parameters", {}).items()},
+        parameter_changes=changes,
     )  # fmt: skip
+
+
+def _unit(q: np.ndarray) -> np.ndarray:
+    return q / np.linalg.norm(q, axis=1)[:, None]
 
 
 def _first_instances(ulog) -> dict[str, dict[str, np.ndarray]]:
