@@ -59,6 +59,7 @@ INTERFACES = "tests/test_estimator_interfaces.py::"
 CACHE_KEYS = "tests/test_cache_keys_property.py::"
 PIPELINE = "tests/test_pipeline.py::"
 REPLAY_TIMING = "tests/test_replay_timing.py::"
+REPLAY_TRUTH = "tests/test_replay_truth.py::"
 BANDS = "tests/test_consistency_bands.py::"
 ROUGHENING = "tests/test_roughening.py::"
 PARTICLE_KERNELS = "tests/test_particle_kernels.py::"
@@ -186,9 +187,9 @@ MUTATIONS = (
     Mutation(
         "a job kind writes summary.json itself",
         "src/quadest/app/replay_job.py",
-        "        return Report(tables, fields, arrays, caption(data, results), after)\n",
+        '        return Report(tables, fields, arrays, caption(data, results), "\\n".join(after) or None)\n',
         '        (finished.out_dir / "summary.json").write_text("{}")\n'
-        "        return Report(tables, fields, arrays, caption(data, results), after)\n",
+        '        return Report(tables, fields, arrays, caption(data, results), "\\n".join(after) or None)\n',
         (PIPELINE + "test_only_the_pipeline_writes_summary_json_and_the_metric_tables",),
     ),
     Mutation(
@@ -652,6 +653,58 @@ MUTATIONS = (
         "        to_smoothed = difference_to_smoothed({**angles, PX4: ref_angles}, offline, window)",
         "        to_smoothed = difference_to_smoothed(angles, offline, window)",
         ("tests/test_replay.py::test_smoothed_replay_writes_every_rows_difference_to_the_offline_reference",),
+    ),
+    Mutation(
+        "replay: the log's declination left out of our filters' yaw",
+        "src/quadest/app/replay_job.py",
+        'turned = {res.name: to_true_north(res.saved["estimate"], data.declination.deg) for res in results}',
+        'turned = {res.name: res.saved["estimate"] for res in results}',
+        (REPLAY_TRUTH + "test_the_logs_declination_turns_every_filters_yaw_by_it",),
+    ),
+    Mutation(
+        "replay: the declination subtracted from the magnetic yaw",
+        "src/quadest/replay/declination.py",
+        "np.array([0.0, 0.0, np.radians(declination_deg)])",
+        "np.array([0.0, 0.0, -np.radians(declination_deg)])",
+        (REPLAY_TRUTH + "test_the_logs_declination_turns_every_filters_yaw_by_it",
+         REPLAY_TRUTH + "test_turning_to_true_north_adds_the_declination_to_yaw_alone"),
+    ),
+    Mutation(
+        "replay: the declination's value at the log's start preferred to its last change",
+        "src/quadest/replay/declination.py",
+        "t, value = changed[-1]",
+        "t, value = changed[0]",
+        (REPLAY_TRUTH + "test_the_last_logged_change_of_the_declination_counts",),
+    ),
+    Mutation(
+        "replay: the ground truth's quaternion read scalar last",
+        "src/quadest/replay/ulog.py",
+        'truth_q = _unit(_vector(topics[ATTITUDE_TRUTH], "q", path, ATTITUDE_TRUTH, 4))',
+        'truth_q = _unit(_vector(topics[ATTITUDE_TRUTH], "q", path, ATTITUDE_TRUTH, 4)[:, [1, 2, 3, 0]])',
+        (REPLAY_TRUTH + "test_truth_equal_to_px4s_estimate_gives_px4_zero_error_in_every_state",
+         REPLAY_TRUTH + "test_a_constant_yaw_offset_of_the_truth_is_px4s_yaw_and_attitude_error"),
+    ),
+    Mutation(
+        "replay: errors against the truth over the warm-up too",
+        "src/quadest/app/replay_job.py",
+        "compared = window & np.isfinite(truth).all(axis=-1)",
+        "compared = np.isfinite(truth).all(axis=-1)",
+        (REPLAY_TRUTH + "test_truth_equal_to_px4s_estimate_gives_px4_zero_error_in_every_state",
+         REPLAY_TRUTH + "test_a_constant_yaw_offset_of_the_truth_is_px4s_yaw_and_attitude_error"),
+    ),
+    Mutation(
+        "replay: PX4's estimate scored against the ground truth's interpolation of itself",
+        "src/quadest/app/replay_job.py",
+        "{**{n: e[0] for n, e in turned.items()}, PX4_ROW: reference}",
+        "{**{n: e[0] for n, e in turned.items()}, PX4_ROW: data.ground_truth}",
+        (REPLAY_TRUTH + "test_a_constant_yaw_offset_of_the_truth_is_px4s_yaw_and_attitude_error",),
+    ),
+    Mutation(
+        "replay: the caption silent about the log's ground truth",
+        "src/quadest/app/replay_job.py",
+        "NOT_APPLICABLE, (turned, truth_line(data)))",
+        "NOT_APPLICABLE, (turned,))",
+        (REPLAY_TRUTH + "test_a_log_without_ground_truth_writes_no_truth_errors_and_says_so",),
     ),
     Mutation(
         "a model plugin's PCRLB flag ignored (a known list again)",
