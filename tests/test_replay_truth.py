@@ -124,6 +124,17 @@ def test_truth_equal_to_px4s_estimate_gives_px4_zero_error_in_every_state(runs):
     assert "errors against it in truth_errors.csv" in summary["_caption"]
 
 
+@pytest.mark.parametrize("doc", ["outputs.md", "replay.md"])
+def test_the_docs_list_the_columns_written(runs, doc):
+    """The column table of truth_errors.csv in the docs names exactly the columns written."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / doc).read_text()
+    part = text[text.index("`truth_errors.csv`") :]
+    table = part[part.index("| column") :].split("\n\n")[0].split("\n-")[0]
+    rows = [line.strip() for line in table.splitlines()[2:]]
+    documented = [line.split("|")[1].strip().strip("`") for line in rows if line.startswith("|")]
+    assert documented == list(pd.read_csv(runs["same"][0] / "truth_errors.csv").columns)
+
+
 def test_a_constant_yaw_offset_of_the_truth_is_px4s_yaw_and_attitude_error(runs):
     out, summary = runs["offset"]
     rms = truth_table(out)
