@@ -25,6 +25,7 @@ from __future__ import annotations
 import copy
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -202,6 +203,18 @@ def test_the_shipped_log_is_referenced_by_attitude_estimator_qs_declination_zero
     log = read_flight_log(shipped_log())
     got = log_declination(log.parameters, log.parameter_changes)
     assert (got.deg, got.source) == (0.0, Q_ESTIMATOR) and log.truth_q is None and not log.position_truth
+
+
+@pytest.mark.parametrize(
+    ("ground_truth", "position_truth", "line"),
+    [(np.zeros((2, 4)), False, "Ground truth: vehicle_attitude_groundtruth"),
+     (None, True, "has vehicle_local_position_groundtruth but no vehicle_attitude_groundtruth"),
+     (None, False, "The log has no ground truth")],
+)  # fmt: skip
+def test_the_caption_names_what_truth_the_log_has(ground_truth, position_truth, line):
+    from quadest.app.replay_job import truth_line
+
+    assert line in truth_line(SimpleNamespace(ground_truth=ground_truth, position_truth=position_truth))
 
 
 def test_turning_to_true_north_adds_the_declination_to_yaw_alone():
