@@ -115,7 +115,7 @@ def markdown(table: pd.DataFrame, reference: Job, job: Job, estimator: str, comm
     """The report: the two jobs, the pairing, and the difference per state (the grouped states when present)."""
     grouped = table.set_index("state").reindex([s for s in SHOWN if s in set(table["state"])]).reset_index()
     shown = grouped if len(grouped) else table
-    seed, runs = int(reference.rows["seed"].iloc[0]), int(reference.rows["runs"].iloc[0])
+    seed, runs = (reference.rows[c].iloc[0] for c in ("seed", "runs"))  # equal in both jobs (check_paired)
     lines = [
         f"# {job.label} against {reference.label}: {estimator}, paired by run",
         "",
