@@ -4,9 +4,10 @@ A job's paired tables (``paired_comparison.csv``, ``paired_grouped.csv``) compar
 *of one job*. A claim about the data (seed 004's 8 beacons against 3, a sensor grade, a scenario)
 needs the same estimator run on two jobs. When both jobs have the same seed and the same runs,
 run ``i`` of one and run ``i`` of the other draw the seed's per-run streams for run ``i`` (common
-random numbers, :mod:`quadest.montecarlo`): the per-run RMSEs are paired samples, as they are
-between two estimators of one job, and pairing them removes the run-to-run scatter the two jobs
-share.
+random numbers, :mod:`quadest.montecarlo.streams`): the per-run RMSEs are paired samples, as they
+are between two estimators of one job, and pairing them removes the run-to-run scatter the two jobs
+share. A stream whose draws the changed setting alters (the camera's, with another number of
+beacons) is not shared; every other stream is.
 
 The two jobs' rows of the estimator become one tidy table with the two jobs as two "estimators"
 (named by their labels, the reference first), plus the 3-D position and velocity and the attitude
