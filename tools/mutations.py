@@ -58,6 +58,7 @@ FAMILY = "tests/test_sigma_point_family.py::"
 INTERFACES = "tests/test_estimator_interfaces.py::"
 CACHE_KEYS = "tests/test_cache_keys_property.py::"
 PIPELINE = "tests/test_pipeline.py::"
+CROSS_JOB = "tests/test_cross_job.py::"
 REPLAY_TIMING = "tests/test_replay_timing.py::"
 REPLAY_TRUTH = "tests/test_replay_truth.py::"
 BANDS = "tests/test_consistency_bands.py::"
@@ -1217,6 +1218,27 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "self.logw = np.full_like(out.w, self._log_uniform)",
         "self.logw = np.log(out.w)",
         (FAST_PF + "test_fast_mode_rmse_agrees_with_exact_mode_within_monte_carlo_error[numba]",),
+    ),
+    Mutation(
+        "the cross-job comparison takes the reference as the compared job",
+        "src/quadest/aggregate/cross_job.py",
+        "pd.concat([tidy(reference), tidy(job)]",
+        "pd.concat([tidy(job), tidy(reference)]",
+        (CROSS_JOB + "test_a_constant_ratio_gives_that_ratio_with_a_zero_width_interval",),
+    ),
+    Mutation(
+        "the cross-job comparison accepts jobs on different seeds or run counts",
+        "src/quadest/aggregate/cross_job.py",
+        "if ours != theirs or len(ours) != 1:",
+        "if len(ours) != 1:",
+        (CROSS_JOB + "test_jobs_that_do_not_share_their_runs_are_refused_before_any_work",),
+    ),
+    Mutation(
+        "runs paired by their order in the file, not by their index",
+        "src/quadest/evaluation/paired.py",
+        'sub = metrics[metrics["estimator"] == name]',
+        'sub = metrics[metrics["estimator"] == name]; sub = sub.assign(run=sub.groupby("state").cumcount())',
+        (CROSS_JOB + "test_runs_are_paired_by_their_index_not_by_their_order_in_the_file",),
     ),
 )  # fmt: skip
 

@@ -47,6 +47,11 @@ TIME_COLUMNS = (
 )  # fmt: skip
 
 
+def has_grouped_states(metrics: pd.DataFrame) -> bool:
+    """Whether ``metrics`` holds every state :func:`grouped_metrics` reads (a job of ``model=ins``)."""
+    return {*(axis for axes in GROUPS.values() for axis in axes), "error_angle"} <= set(metrics["state"])
+
+
 def grouped_metrics(metrics: pd.DataFrame) -> pd.DataFrame:
     """One row per estimator × run × {position_3d, velocity_3d, error_angle}; a diverged run
     keeps its row (RMSE NaN, ``diverged`` true), so that every estimator has every run and the
