@@ -210,7 +210,8 @@ class InsModelConf(QuadrotorFlightConf):
     camera from ``sensor.gps``/``sensor.barometer``/``sensor.vision``, the magnetometer from
     ``model.magnetometer``). The inherited quadrotor keys fly the truth; ``process_noise`` and
     ``initial_std`` belong to the quadrotor filters (``ins_process_noise``/``ins_initial_std`` are
-    read here)."""
+    read here). ``recording``: null flies the truth; a file or an EuRoC-layout folder
+    (:mod:`quadest.simulation.euroc`) replays its IMU against its reference instead."""
 
     name: str = "ins"
     attitude_chart: str = "rotation_vector"
@@ -218,6 +219,7 @@ class InsModelConf(QuadrotorFlightConf):
     magnetometer: MagnetometerConf = field(default_factory=MagnetometerConf)
     ins_process_noise: InsProcessNoiseConf = field(default_factory=InsProcessNoiseConf)
     ins_initial_std: InsInitialStdConf = field(default_factory=InsInitialStdConf)
+    recording: str | None = None
 
 
 @dataclass
