@@ -1,4 +1,4 @@
-"""EuRoC-layout folders as recordings (:class:`~quadest.simulation.recorded.Recording`): the IMU
+"""EuRoC-layout folders as recordings (:class:`~quadest.simulation.recording.Recording`): the IMU
 in, the motion-capture reference out, on the IMU's time stamps (docs/models.md, "Data from a file").
 
 The layout of the EuRoC MAV datasets (Burri et al. 2016, "The EuRoC micro aerial vehicle
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from quadest.numerics import quaternion as quat
-from quadest.simulation.recorded import Recording
+from quadest.simulation.recording import Recording
 
 IMU_CSV = Path("mav0", "imu0", "data.csv")
 REFERENCE_CSV = Path("mav0", "state_groundtruth_estimate0", "data.csv")

@@ -23,7 +23,6 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -34,23 +33,13 @@ from quadest.models.base import FilterModel
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.streams import run_seed_sequences
 from quadest.sensors.record import SensorRecord
+from quadest.simulation.euroc import IMU_CSV, REFERENCE_CSV, check_euroc_folder, read_euroc
+from quadest.simulation.recording import Recording
 from quadest.simulation.validation_data import simulation_labels
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 _ALIASES = {"time": ("time", "T", "t"), "measurements": ("measurements", "Y", "y", "z"),
             "truth": ("truth", "X", "x"), "inputs": ("inputs", "U", "u")}  # fmt: skip
-
-
-@dataclass(frozen=True)
-class Recording:
-    """One recorded run: ``time`` (K,), ``measurements`` (K, m), ``truth`` (K, n) or ``None``,
-    ``inputs`` (K, nu) or ``None``, and ``notes`` on how it was read (labels of the job)."""
-
-    time: np.ndarray
-    measurements: np.ndarray
-    truth: np.ndarray | None = None
-    inputs: np.ndarray | None = None
-    notes: Mapping[str, object] = field(default_factory=dict)
 
 
 def resolve_recording(path: str) -> Path:
@@ -61,8 +50,6 @@ def resolve_recording(path: str) -> Path:
     Raises:
         ConfigError: ``model.recording`` names nothing, or a folder without the EuRoC files or columns.
     """
-    from quadest.simulation.euroc import check_euroc_folder  # euroc's recordings are this module's
-
     given = Path(path)
     if not given.is_absolute():
         for root in (_PACKAGE / "data", _PACKAGE.parents[1] / "data"):
@@ -83,8 +70,6 @@ def resolve_recording(path: str) -> Path:
 def recording_files(path: str) -> list[Path]:
     """The files ``model.recording`` = ``path`` is read from (the file itself, or a EuRoC folder's two
     CSV files): what the data cache keys by content (:func:`quadest.cache.keys.data_material`)."""
-    from quadest.simulation.euroc import IMU_CSV, REFERENCE_CSV
-
     found = resolve_recording(path)
     return [found / IMU_CSV, found / REFERENCE_CSV] if found.is_dir() else [found]
 
@@ -157,8 +142,6 @@ def _read_npz(path: Path) -> list[Recording]:
 
 def read_recordings(path: str | Path) -> list[Recording]:
     """Every recording of a JSON, CSV or NPZ file or of an EuRoC-layout folder (module docstring)."""
-    from quadest.simulation.euroc import read_euroc
-
     path = Path(path)
     if path.is_dir():
         return [read_euroc(path)]
