@@ -61,6 +61,21 @@ def test_a_planar_trajectory_aligns_by_a_rotation_not_a_reflection():
     assert ate.position_rmse < ROUND_OFF and ate.rotation_rmse < ROUND_OFF
 
 
+def test_a_mirrored_trajectory_is_not_aligned_by_a_reflection():
+    """The orthogonal matrix that fits a mirror image best is the mirror itself (error 0, det −1);
+    the alignment is restricted to rotations (S of eq. 43), which must leave an error: Umeyama's
+    minimum ``var_x + var_y − 2 tr(D S)`` with ``S = diag(1, 1, −1)``."""
+    p, q = _reference()
+    mirrored = p * np.array([1.0, 1.0, -1.0])
+    a = align(mirrored, p, "se3")
+    assert np.linalg.det(a.rotation) == pytest.approx(1.0, abs=ROUND_OFF)
+    xc, yc = mirrored - mirrored.mean(axis=0), p - p.mean(axis=0)
+    d = np.linalg.svd(yc.T @ xc / len(p), compute_uv=False)
+    least = np.mean(np.sum(xc**2, axis=-1)) + np.mean(np.sum(yc**2, axis=-1)) - 2.0 * (d[0] + d[1] - d[2])
+    ate = absolute_error(mirrored, q, p, q, "se3")
+    assert ate.position_rmse == pytest.approx(np.sqrt(least), rel=1e-9) and ate.position_rmse > 0.1
+
+
 def test_a_yaw_offset_aligns_to_zero_under_4dof_and_a_tilt_does_not():
     p, q = _reference()
     yaw = Rotation.from_rotvec([0.0, 0.0, -2.2])
