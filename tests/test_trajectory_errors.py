@@ -187,9 +187,19 @@ def test_ape_and_rpe_equal_evos(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     evo = json.loads(done.stdout.strip().splitlines()[-1])
     ours = absolute_error(p_est, q_est, p, q, "se3")
+    print(f"evo {evo['evo']}: APE {ours.position_rmse:.12f} m (evo {evo['ape_translation_rmse']:.12f}), "
+          f"{ours.rotation_rmse:.12f} rad (evo {evo['ape_rotation_rmse']:.12f})")  # fmt: skip
     assert ours.position_rmse == pytest.approx(evo["ape_translation_rmse"], rel=1e-9)
     assert ours.rotation_rmse == pytest.approx(evo["ape_rotation_rmse"], rel=1e-9)
     for rpe, theirs in zip(relative_errors(p_est, q_est, p, q, distances, rel_tol=0.1), evo["rpe"], strict=True):
+        rms = [
+            np.sqrt(np.mean(np.square(e)))
+            for e in (rpe.translation, theirs["translation"], rpe.rotation, theirs["rotation"])
+        ]
+        print(f"RPE at {rpe.distance:g} m: {len(rpe.pairs)} pairs (evo {len(theirs['delta_ids'])}), "
+              f"RMS {rms[0]:.12f} m (evo {rms[1]:.12f}), {rms[2]:.12f} rad (evo {rms[3]:.12f}), largest difference "
+              f"{np.max(np.abs(rpe.translation - theirs['translation'])):.1e} m, "
+              f"{np.max(np.abs(rpe.rotation - theirs['rotation'])):.1e} rad")  # fmt: skip
         assert rpe.pairs[:, 1].tolist() == theirs["delta_ids"]
         np.testing.assert_allclose(rpe.translation, theirs["translation"], rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(rpe.rotation, theirs["rotation"], rtol=1e-9, atol=1e-12)
