@@ -17,6 +17,7 @@ from euroc_folder import (
     IMU_HEADER,
     REFERENCE_HEADER,
     imu_rows,
+    motion,
     reference_rows,
     seconds,
     stamps,
@@ -27,6 +28,7 @@ from helpers import compose_config, compose_settings
 from quadest.app.settings import data_key
 from quadest.errors import ConfigError
 from quadest.numerics import quaternion as quat
+from quadest.simulation.attitude_data import build_attitude_data
 from quadest.simulation.euroc import read_euroc
 from quadest.simulation.ins_data import build_ins_data, validate_ins
 from quadest.simulation.recorded import read_recordings
@@ -106,6 +108,30 @@ def test_a_recording_is_cut_to_duration_and_starts_at_its_first_sample(tmp_path)
     assert data.labels["recording"] == str(folder)
 
 
+def test_the_attitude_model_reads_the_folder_and_predicts_its_accelerometer(tmp_path):
+    """``model=attitude`` on the same folder: the gyro is the input, the accelerometer the
+    measurement, the reference's attitude and biases the truth; its known earth-frame acceleration
+    is the reference velocity's central difference, within the Taylor bound ``h²/6 max|v‴|`` of the
+    analytic one inside the record, so the model's accelerometer prediction at the true state
+    matches the recorded samples to that bound (a frame or gravity-sign error would miss by 2g)."""
+    folder = write_flight(tmp_path, PERIOD_NS, 1.0)
+    settings = compose_settings(
+        ["model=attitude", "runs=1", f"model.recording={folder}", "sample_period=0.005", "duration=20"]
+    )
+    data = build_attitude_data(settings)
+    t = seconds(stamps(PERIOD_NS, 201))
+    written, imu = reference_rows(t), imu_rows(t)
+    np.testing.assert_allclose(data.truth[0, :, 0:4], written[:, 3:7], rtol=0, atol=ROUND_OFF)
+    np.testing.assert_allclose(data.truth[0, :, 4:10], written[:, 10:16], rtol=0, atol=ROUND_OFF)
+    assert np.array_equal(data.measurements[0], imu[:, 3:6])
+    bound = 0.005**2 / 6.0 * 16.0 * 0.8**4  # h²/6 max|v‴|: the y axis, sin(2ωt), has v‴ up to (2ω)⁴
+    inside = slice(1, 200)
+    assert np.max(np.abs(data.inputs[0, inside, 3:6] - motion(t)["a"][inside])) < bound
+    predicted = np.stack([data.model.h(data.truth[:, k : k + 1], data.inputs[:, k])[0, 0] for k in range(1, 200)])
+    assert np.max(np.abs(predicted - imu[inside, 3:6])) < bound
+    assert set(data.sensors) == {"mag"}
+
+
 def _drop_column(header: str, name: str) -> str:
     return ",".join(cell for cell in header.split(",") if not cell.strip().lstrip("#").startswith(name))
 
@@ -151,23 +177,27 @@ def test_quadest_refuses_a_folder_without_the_imu_file_with_exit_2(tmp_path):
     assert not (tmp_path / "o" / "metrics.csv").exists()
 
 
-def test_quadest_runs_the_ins_on_a_euroc_folder(tmp_path):
+@pytest.mark.parametrize(
+    ("model", "extra", "truth_columns", "written_columns"),
+    [("ins", ["model.aiding=[gps]"], slice(4, 7), slice(0, 3)), ("attitude", [], slice(0, 4), slice(3, 7))],
+)
+def test_quadest_runs_on_a_euroc_folder(tmp_path, model, extra, truth_columns, written_columns):
+    """The whole job, with the written reference as the truth of ``timeseries.npz`` (position for
+    the INS, the quaternion for the attitude filter) and finite errors for every state."""
     folder = write_flight(tmp_path / "flight", PERIOD_NS, 2.0)
     out = tmp_path / "o"
     proc = _quadest(
-        ["model=ins", f"model.recording={folder}", "model.aiding=[gps]", "sample_period=0.005", "duration=2.0",
-         "runs=1", "estimator=[mekf]", "output.figures=false", "progress=false", "cache.enabled=false",
-         f"hydra.run.dir={out}"],
+        [f"model={model}", f"model.recording={folder}", *extra, "sample_period=0.005", "duration=2.0", "runs=1",
+         "estimator=[mekf]", "output.figures=false", "progress=false", "cache.enabled=false", f"hydra.run.dir={out}"],
         tmp_path,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     table = pd.read_csv(out / "metrics.csv")
-    position = table[(table["estimator"] == "mekf") & table["state"].isin(["x", "y", "z"])]
-    assert len(position) == 3 and np.isfinite(position["rmse"]).all()
-    series = np.load(out / "timeseries.npz")
-    truth = series["truth"]
+    rows = table[(table["estimator"] == "mekf") & (table["quantity"] == "filter")]
+    assert len(rows) > 0 and np.isfinite(rows["rmse"]).all()
+    truth = np.load(out / "timeseries.npz")["truth"][0]
     written = reference_rows(seconds(stamps(PERIOD_NS, 401)))
-    np.testing.assert_allclose(truth.reshape(-1, 16)[:, 4:7], written[:, 0:3], rtol=0, atol=ROUND_OFF)
+    np.testing.assert_allclose(truth[:, truth_columns], written[:, written_columns], rtol=0, atol=ROUND_OFF)
 
 
 def test_the_data_is_keyed_by_the_folders_csv_bytes(tmp_path):

@@ -921,8 +921,8 @@ MUTATIONS += (  # EuRoC-layout folders and the trajectory errors (docs/models.md
     Mutation(
         "recorded IMU samples taken as the means over the following step",
         "src/quadest/simulation/ins_data.py",
-        "inputs=interval_means(r.inputs[k][None])[0])",
-        "inputs=r.inputs[k])",
+        "inputs=interval_means(r.inputs[None])[0])",
+        "inputs=r.inputs)",
         (EUROC + "test_the_ins_flies_the_reference_with_the_readers_imu",),
     ),
     Mutation(
@@ -938,6 +938,20 @@ MUTATIONS += (  # EuRoC-layout folders and the trajectory errors (docs/models.md
         "    if recording is not None:\n        files = recording_files(recording)",
         "    if recording is not None and False:\n        files = recording_files(recording)",
         (EUROC + "test_the_data_is_keyed_by_the_folders_csv_bytes",),
+    ),
+    Mutation(
+        "the attitude model on a recording with gravity along +z",
+        "src/quadest/simulation/attitude_data.py",
+        "T, np.array([0.0, 0.0, -float(mcfg.gravity)]), magnetometer.mag_earth,",
+        "T, np.array([0.0, 0.0, float(mcfg.gravity)]), magnetometer.mag_earth,",
+        (EUROC + "test_the_attitude_model_reads_the_folder_and_predicts_its_accelerometer",),
+    ),
+    Mutation(
+        "the recorded earth-frame acceleration differenced without the time step",
+        "src/quadest/simulation/attitude_data.py",
+        "np.gradient(reference[..., 7:10], time, axis=1)",
+        "np.gradient(reference[..., 7:10], axis=1)",
+        (EUROC + "test_the_attitude_model_reads_the_folder_and_predicts_its_accelerometer",),
     ),
     Mutation(
         "Umeyama's alignment without the determinant correction (a reflection)",

@@ -57,7 +57,7 @@ from quadest.sensors.noise_laws import noise_law_from_config
 from quadest.simulation.aiding import measure_aiding, sensor_context, validate_aiding
 from quadest.simulation.attitude_data import _measure_with_truth_bias
 from quadest.simulation.quadrotor_data import fly_scenario
-from quadest.simulation.recorded import check_run_count, read_recordings, recorded_data, resolve_recording
+from quadest.simulation.recorded import IMU_STEP_RTOL, read_imu_recordings, recorded_data, resolve_recording
 from quadest.simulation.spec import ModelSpec
 
 
@@ -178,28 +178,15 @@ def build_recorded_ins_data(settings: DataSettings) -> MonteCarloData:
     """The recordings of ``model.recording`` as the INS filters' data (module docstring).
 
     Raises:
-        ConfigError: ``model.recording`` lacks the IMU inputs (6 columns) or the 16-column truth, or
-            does not fit the job (:func:`~quadest.simulation.recorded.recorded_data`).
+        ConfigError: ``model.recording`` is not an IMU recording
+            (:func:`~quadest.simulation.recorded.read_imu_recordings`) or does not fit the job
+            (:func:`~quadest.simulation.recorded.recorded_data`).
     """
     mcfg, scfg = settings.model, settings.sensor
     runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
-    try:
-        recordings = read_recordings(resolve_recording(mcfg.recording))
-    except ValueError as exc:
-        if isinstance(exc, ConfigError):
-            raise
-        raise ConfigError("model.recording", mcfg.recording, str(exc)) from None
-    for r in recordings:
-        if r.inputs is None or r.inputs.shape[1] != 6 or r.truth is None or r.truth.shape[1] != 16:
-            allowed = "IMU inputs [ω̃, f̃] (6 columns) and the INS truth (16 columns) per sample"
-            raise ConfigError("model.recording", mcfg.recording, allowed)
-    kept = [r.time <= r.time[0] + float(settings.duration) + 0.5 * T for r in recordings]
     recordings = [
-        dataclasses.replace(r, time=r.time[k], measurements=r.measurements[k], truth=r.truth[k],
-                            inputs=interval_means(r.inputs[k][None])[0])
-        for r, k in zip(recordings, kept, strict=True)
-    ]  # fmt: skip
-    check_run_count(settings, recordings)
+        dataclasses.replace(r, inputs=interval_means(r.inputs[None])[0]) for r in read_imu_recordings(settings)
+    ]
     streams = run_streams(seed, runs, settings.first_run)
     truth = np.stack([r.truth for r in recordings])
     duration = float(recordings[0].time[-1] - recordings[0].time[0])
@@ -219,13 +206,8 @@ def build_recorded_ins_data(settings: DataSettings) -> MonteCarloData:
         "model": mcfg.name, "recording": str(mcfg.recording), "sensor": scfg.name,
         "attitude_chart": mcfg.attitude_chart, "aiding": "+".join(mcfg.aiding), **recordings[0].notes,
     }  # fmt: skip
-    return recorded_data(settings, model, recordings, x0, P0, starts_at_first_sample=True, step_rtol=STEP_RTOL,
+    return recorded_data(settings, model, recordings, x0, P0, starts_at_first_sample=True, step_rtol=IMU_STEP_RTOL,
                          sensors=records, labels=labels)  # fmt: skip
-
-
-STEP_RTOL = 0.01
-"""A recorded IMU's time steps may differ from ``sample_period`` by 1 % (a logger's clock jitters:
-EuRoC's stamps by well under a microsecond in 5 ms); a dropped sample is refused."""
 
 
 MODEL = ModelSpec(  # n_err = 15

@@ -170,6 +170,42 @@ def check_run_count(settings: DataSettings, recordings: list[Recording]) -> None
         raise ConfigError("model.recording", "runs of different lengths", "recordings of one length")
 
 
+IMU_STEP_RTOL = 0.01
+"""A recorded IMU's time steps may differ from ``sample_period`` by 1 % (a logger's clock jitters:
+EuRoC's stamps by well under a microsecond in 5 ms); a dropped sample is refused."""
+
+
+def read_imu_recordings(settings: DataSettings) -> list[Recording]:
+    """The recordings of ``model.recording`` for a model driven by an IMU (``model=ins``,
+    ``model=attitude``), one per run: each with the IMU samples ``[ω̃, f̃]`` as measured as its
+    inputs (K, 6) and the INS state ``[q, p, v, b_g, b_a]`` as its truth (K, 16), cut to its first
+    ``settings.duration`` seconds (all of it when shorter).
+
+    Raises:
+        ConfigError: ``model.recording`` cannot be read or lacks those columns, or ``runs`` is not
+            the number of recordings.
+    """
+    path = settings.model.recording
+    try:
+        recordings = read_recordings(resolve_recording(path))
+    except ConfigError:
+        raise
+    except ValueError as exc:
+        raise ConfigError("model.recording", path, str(exc)) from None
+    for r in recordings:
+        if r.inputs is None or r.inputs.shape[1] != 6 or r.truth is None or r.truth.shape[1] != 16:
+            allowed = "IMU inputs [ω̃, f̃] (6 columns) and the INS truth [q, p, v, b_g, b_a] (16 columns) per sample"
+            raise ConfigError("model.recording", path, allowed)
+    end = 0.5 * float(settings.sample_period) + float(settings.duration)
+    kept = [r.time <= r.time[0] + end for r in recordings]
+    recordings = [
+        Recording(r.time[k], r.measurements[k], r.truth[k], r.inputs[k], r.notes)
+        for r, k in zip(recordings, kept, strict=True)
+    ]
+    check_run_count(settings, recordings)
+    return recordings
+
+
 def recorded_data(
     settings: DataSettings,
     model: FilterModel,
