@@ -27,6 +27,7 @@ from euroc_folder import (
 from helpers import compose_config, compose_settings
 from quadest.app.settings import data_key
 from quadest.errors import ConfigError
+from quadest.evaluation.trajectory_errors import write_trajectory_errors
 from quadest.numerics import quaternion as quat
 from quadest.simulation.attitude_data import build_attitude_data
 from quadest.simulation.euroc import read_euroc
@@ -198,6 +199,9 @@ def test_quadest_runs_on_a_euroc_folder(tmp_path, model, extra, truth_columns, w
     truth = np.load(out / "timeseries.npz")["truth"][0]
     written = reference_rows(seconds(stamps(PERIOD_NS, 401)))
     np.testing.assert_allclose(truth[:, truth_columns], written[:, written_columns], rtol=0, atol=ROUND_OFF)
+    if model == "ins":  # the trajectory errors of the job (docs/metrics.md) read its series
+        errors = write_trajectory_errors(out, [0.5])
+        assert list(errors["measure"]) == ["ate_se3", "ate_4dof", "rpe"] and np.isfinite(errors["position_m"]).all()
 
 
 def test_the_data_is_keyed_by_the_folders_csv_bytes(tmp_path):

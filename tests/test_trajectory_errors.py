@@ -10,9 +10,11 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
@@ -203,3 +205,43 @@ def test_ape_and_rpe_equal_evos(tmp_path):
         assert rpe.pairs[:, 1].tolist() == theirs["delta_ids"]
         np.testing.assert_allclose(rpe.translation, theirs["translation"], rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(rpe.rotation, theirs["rotation"], rtol=1e-9, atol=1e-12)
+
+
+def _ins_series(p, q):
+    """A job's saved series with the INS state ``[q, p, v, b_g, b_a]`` (zeros past p)."""
+    x = np.concatenate([q, p, np.zeros((len(p), 9))], axis=-1)
+    return x[None]
+
+
+def test_the_command_reads_a_jobs_series_and_writes_trajectory_errors_csv(tmp_path):
+    """An estimate that is the truth moved by a yaw and a translation has no error after either
+    alignment and no relative error; a diverged run (NaN) is left out; a truth that is not the INS
+    state is refused with exit status 2."""
+    p, q = _reference()
+    yaw = Rotation.from_rotvec([0.0, 0.0, 0.8])
+    p_moved, q_moved = _moved(p, q, yaw, np.array([2.0, -1.0, 0.5]))
+    truth = np.concatenate([_ins_series(p, q)] * 2)
+    estimate = np.concatenate([_ins_series(p_moved, q_moved), np.full((1, len(p), 16), np.nan)])
+    np.savez(tmp_path / "timeseries.npz", time=np.arange(len(p)) * 0.05, truth=truth, **{"mekf/estimate": estimate})
+    done = subprocess.run(
+        [sys.executable, "-m", "quadest.evaluation.trajectory_errors", str(tmp_path), "--distances", "1", "4"],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    table = pd.read_csv(tmp_path / "trajectory_errors.csv")
+    assert list(table["measure"]) == ["ate_se3", "ate_4dof", "rpe", "rpe"] and set(table["run"]) == {0}
+    assert list(table["distance_m"].iloc[2:]) == [1.0, 4.0] and (table["pairs"] > 0).all()
+    assert (table["position_m"] < ROUND_OFF).all() and (table["rotation_deg"] < np.degrees(ROUND_OFF)).all()
+    np.savez(
+        tmp_path / "timeseries.npz",
+        time=np.arange(3.0),
+        truth=np.zeros((1, 3, 10)),
+        **{"mekf/estimate": np.zeros((1, 3, 10))},
+    )
+    refused = subprocess.run(
+        [sys.executable, "-m", "quadest.evaluation.trajectory_errors", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1 and "model=ins" in refused.stderr

@@ -954,6 +954,13 @@ MUTATIONS += (  # EuRoC-layout folders and the trajectory errors (docs/models.md
         (EUROC + "test_the_attitude_model_reads_the_folder_and_predicts_its_accelerometer",),
     ),
     Mutation(
+        "the trajectory-errors command takes the truth's attitude for the estimate's",
+        "src/quadest/evaluation/trajectory_errors.py",
+        "ate = absolute_error(est[:, 4:7], est[:, 0:4], ref[:, 4:7], ref[:, 0:4], kind)",
+        "ate = absolute_error(est[:, 4:7], ref[:, 0:4], ref[:, 4:7], ref[:, 0:4], kind)",
+        (TRAJECTORY + "test_the_command_reads_a_jobs_series_and_writes_trajectory_errors_csv",),
+    ),
+    Mutation(
         "Umeyama's alignment without the determinant correction (a reflection)",
         "src/quadest/metrics/trajectory.py",
         "S = np.diag([1.0, 1.0, np.sign(np.linalg.det(U) * np.linalg.det(Vt))])",
