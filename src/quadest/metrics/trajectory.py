@@ -7,20 +7,21 @@ A trajectory is its positions ``p`` (N, 3) and attitudes ``q`` (N, 4), Hamilton 
 first, body → world (:mod:`quadest.numerics.quaternion`), the estimate and the reference sampled
 at the same N times.
 
-- **Alignment** (Zhang & Scaramuzza §III): the transform ``(R, t)`` that minimises
+- **Alignment** (Zhang & Scaramuzza, "trajectory alignment"): the transform ``(R, t)`` that minimises
   ``Σ_i |p_ref,i − (R p_est,i + t)|²``. SE(3), rotation and translation without scale (their
-  choice for stereo and visual-inertial systems): Umeyama (1991, "Least-squares estimation of
+  choice for stereo visual odometry): Umeyama (1991, "Least-squares estimation of
   transformation parameters between two point patterns", IEEE PAMI 13(4)) with the scale fixed to
   1, ``R = U S Vᵀ`` from the SVD ``U D Vᵀ`` of the cross-covariance ``Σ_xy = (1/N) Σ (y − μ_y)(x − μ_x)ᵀ``
   (x the estimate, y the reference; eq. 38), ``S = diag(1, 1, det U det V)`` (eq. 43), and
-  ``t = μ_y − R μ_x`` (eq. 41 with c = 1). 4-DoF, translation and yaw (visual-inertial systems,
-  whose roll and pitch are observable from gravity): ``R = Rz(ψ)`` with the ψ that maximises
+  ``t = μ_y − R μ_x`` (eq. 41 with c = 1). 4-DoF, translation and yaw (their choice for
+  visual-inertial systems, whose roll and pitch are observable from gravity): ``R = Rz(ψ)`` with the ψ that maximises
   ``Σ (y − μ_y)ᵀ Rz(ψ) (x − μ_x)``, ``ψ = atan2(Σ (x_x y_y − x_y y_x), Σ (x_x y_x + x_y y_y))`` on the
   centred coordinates, and the same ``t``.
-- **ATE** (their §IV.A, eqs. 5–7): with ``p̂_i = R p_est,i + t`` and ``R̂_i = R R_est,i``, the
-  position error ``|p_ref,i − p̂_i|`` and the rotation error, the angle of ``R_ref,i R̂_iᵀ``; the ATE
-  is the RMS of each over the trajectory.
-- **RPE** (their §IV.B): for a sub-trajectory length ``d``, the pairs ``(i, j)`` whose distance
+- **ATE** (their "absolute trajectory error"): with ``p̂_i = R p_est,i + t`` and
+  ``R̂_i = R R_est,i``, the position error ``|p_ref,i − p̂_i|`` (as their toolbox,
+  rpg_trajectory_evaluation, and evo compute it) and the rotation error, the angle of
+  ``R_ref,i R̂_iᵀ``; the ATE is the RMS of each over the trajectory.
+- **RPE** (their "relative error"): for a sub-trajectory length ``d``, the pairs ``(i, j)`` whose distance
   travelled along the reference from ``i`` to ``j`` is closest to ``d`` (j > i, within
   ``rel_tol · d``, one pair per start i); for each, the relative motions ``δ_ref = T_ref,i⁻¹ T_ref,j``
   and ``δ_est = T_est,i⁻¹ T_est,j`` and their difference ``E = δ_ref⁻¹ δ_est`` (Sturm et al. 2012,
