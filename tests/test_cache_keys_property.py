@@ -41,6 +41,7 @@ from quadest.config.paths import config_dir
 from quadest.estimators.registry import builtin_estimators
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import log_path
+from quadest.simulation.recorded import resolve_recording
 from quadest.simulation.registry import model_specs
 
 LeafPath = tuple[str | int, ...]
@@ -101,11 +102,17 @@ def under(path: LeafPath, prefixes: tuple[str, ...]) -> bool:
 
 def changed(path: LeafPath, value, cfg, tmp_path: Path):
     """Another value of the same kind. A log path is changed to a copy of the log under another
-    name (a path must name a readable log; the name is in the replay's labels)."""
+    name (a path must name a readable log; the name is in the replay's labels), a recording to a
+    copy of the shipped one."""
     if path[-1] == "path" and path[0] == "source":
         copied = tmp_path / "copied.ulg"
         if not copied.exists():
             shutil.copyfile(log_path(cfg.source.path), copied)
+        return str(copied)
+    if path == ("model", "recording"):  # a path must name a readable recording (its bytes are in the key)
+        copied = tmp_path / "copied_recording.json"
+        if not copied.exists():
+            shutil.copyfile(resolve_recording("sarkka-svensson-2023/pendulum.json"), copied)
         return str(copied)
     if isinstance(value, bool):
         return not value

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
 from quadest.numerics import quaternion as quat
 from quadest.quadrotor.kinematics import rotation
@@ -117,3 +117,15 @@ def test_right_jacobian_against_finite_differences(rotvecs):
                 2 * h
             )
         assert np.abs(quat.right_jacobian(v) - fd).max() < 1e-8
+
+
+def test_slerp_matches_scipy_along_the_shorter_arc(quaternions):
+    """``slerp`` against scipy's ``Slerp`` between each pair of rotations, with ``q`` given with
+    either sign (the same rotation: the arc taken must be the shorter one either way)."""
+    p, q = quaternions.reshape(-1, 4)[:10], quaternions.reshape(-1, 4)[10:]
+    fractions = np.array([0.0, 0.25, 0.5, 0.9, 1.0])
+    for a, b in zip(p, q, strict=True):
+        expected = _from_scipy(Slerp([0.0, 1.0], _scipy(np.stack([a, b])))(fractions))
+        for sign in (1.0, -1.0):
+            got = quat.slerp(np.broadcast_to(a, (5, 4)), np.broadcast_to(sign * b, (5, 4)), fractions)
+            assert _same_rotation(got, expected) < 1e-10

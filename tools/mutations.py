@@ -941,6 +941,116 @@ B_SENSORS = "tests/test_behaviours_sensors.py::"
 B_CLOSED_LOOP = "tests/test_behaviours_closed_loop.py::"
 B_REPLAY = "tests/test_behaviours_replay.py::"
 
+EUROC = "tests/test_euroc.py::"
+TRAJECTORY = "tests/test_trajectory_errors.py::"
+MUTATIONS += (  # EuRoC-layout folders and the trajectory errors (docs/models.md, docs/metrics.md)
+    Mutation(
+        "the EuRoC quaternion read as x, y, z, w",
+        "src/quadest/simulation/euroc.py",
+        '"q_RS_w", "q_RS_x", "q_RS_y", "q_RS_z",',
+        '"q_RS_x", "q_RS_y", "q_RS_z", "q_RS_w",',
+        (EUROC + "test_the_reader_returns_the_written_reference_and_drops_the_imu_outside_its_span",),
+    ),
+    Mutation(
+        "the EuRoC reference interpolated component-wise, not by slerp",
+        "src/quadest/simulation/euroc.py",
+        "out[:, 3:7] = quat.slerp(q_lo, q_hi, fraction)",
+        "out[:, 3:7] = quat.normalize(out[:, 3:7])",
+        (EUROC + "test_the_reference_between_its_samples_is_exact_for_a_constant_rate_and_velocity",),
+    ),
+    Mutation(
+        "EuRoC's R frame taken upside down",
+        "src/quadest/simulation/euroc.py",
+        "EARTH_FROM_EUROC = np.array([1.0, 0.0, 0.0, 0.0])",
+        "EARTH_FROM_EUROC = np.array([0.0, 1.0, 0.0, 0.0])",
+        (EUROC + "test_the_ins_flies_the_reference_with_the_readers_imu",),
+    ),
+    Mutation(
+        "the IMU sample at the reference's first stamp dropped",
+        "src/quadest/simulation/euroc.py",
+        "inside = (imu_stamps >= ref_stamps[0])",
+        "inside = (imu_stamps > ref_stamps[0])",
+        (EUROC + "test_the_reader_returns_the_written_reference_and_drops_the_imu_outside_its_span",),
+    ),
+    Mutation(
+        "recorded IMU samples taken as the means over the following step",
+        "src/quadest/simulation/ins_data.py",
+        "inputs=interval_means(r.inputs[None])[0])",
+        "inputs=r.inputs)",
+        (EUROC + "test_the_ins_flies_the_reference_with_the_readers_imu",),
+    ),
+    Mutation(
+        "a recording on model=ins starts one period before its first sample",
+        "src/quadest/simulation/ins_data.py",
+        "starts_at_first_sample=True",
+        "starts_at_first_sample=False",
+        (EUROC + "test_a_recording_is_cut_to_duration_and_starts_at_its_first_sample",),
+    ),
+    Mutation(
+        "a recording keyed in the cache by its path only",
+        "src/quadest/cache/keys.py",
+        "    if recording is not None:\n        files = recording_files(recording)",
+        "    if recording is not None and False:\n        files = recording_files(recording)",
+        (EUROC + "test_the_data_is_keyed_by_the_folders_csv_bytes",),
+    ),
+    Mutation(
+        "the attitude model on a recording with gravity along +z",
+        "src/quadest/simulation/attitude_data.py",
+        "T, np.array([0.0, 0.0, -float(mcfg.gravity)]), magnetometer.mag_earth,",
+        "T, np.array([0.0, 0.0, float(mcfg.gravity)]), magnetometer.mag_earth,",
+        (EUROC + "test_the_attitude_model_reads_the_folder_and_predicts_its_accelerometer",),
+    ),
+    Mutation(
+        "the recorded earth-frame acceleration differenced without the time step",
+        "src/quadest/simulation/attitude_data.py",
+        "np.gradient(reference[..., 7:10], time, axis=1)",
+        "np.gradient(reference[..., 7:10], axis=1)",
+        (EUROC + "test_the_attitude_model_reads_the_folder_and_predicts_its_accelerometer",),
+    ),
+    Mutation(
+        "the trajectory-errors command takes the truth's attitude for the estimate's",
+        "src/quadest/evaluation/trajectory_errors.py",
+        "ate = absolute_error(est[:, 4:7], est[:, 0:4], ref[:, 4:7], ref[:, 0:4], kind)",
+        "ate = absolute_error(est[:, 4:7], ref[:, 0:4], ref[:, 4:7], ref[:, 0:4], kind)",
+        (TRAJECTORY + "test_the_command_reads_a_jobs_series_and_writes_trajectory_errors_csv",),
+    ),
+    Mutation(
+        "Umeyama's alignment without the determinant correction (a reflection)",
+        "src/quadest/metrics/trajectory.py",
+        "S = np.diag([1.0, 1.0, np.sign(np.linalg.det(U) * np.linalg.det(Vt))])",
+        "S = np.eye(3)",
+        (TRAJECTORY + "test_a_mirrored_trajectory_is_not_aligned_by_a_reflection",),
+    ),
+    Mutation(
+        "the alignment's translation from the centroids without the rotation",
+        "src/quadest/metrics/trajectory.py",
+        "return Alignment(R, mu_y - R @ mu_x)",
+        "return Alignment(R, mu_y - mu_x)",
+        (TRAJECTORY + "test_a_trajectory_moved_by_a_known_se3_transform_aligns_to_zero_error",),
+    ),
+    Mutation(
+        "the 4-DoF yaw with the cross term's sign flipped",
+        "src/quadest/metrics/trajectory.py",
+        "np.sum(xc[:, 0] * yc[:, 1] - xc[:, 1] * yc[:, 0])",
+        "np.sum(xc[:, 1] * yc[:, 0] - xc[:, 0] * yc[:, 1])",
+        (TRAJECTORY + "test_a_yaw_offset_aligns_to_zero_under_4dof_and_a_tilt_does_not",),
+    ),
+    Mutation(
+        "the ATE as the mean position error, not its RMS",
+        "src/quadest/metrics/trajectory.py",
+        "return float(np.sqrt(np.mean(self.position**2)))",
+        "return float(np.mean(self.position))",
+        (TRAJECTORY + "test_noise_orthogonal_to_the_trajectory_keeps_its_rms",),
+    ),
+    Mutation(
+        "the RPE's rotation error taken at the pair's end, not between the relative motions",
+        "src/quadest/metrics/trajectory.py",
+        "E_R = dR_ref_T @ dR_est",
+        "E_R = R_ref[j] @ np.swapaxes(R_est[j], -1, -2)",
+        (TRAJECTORY + "test_rpe_of_a_constant_rotation_drift_is_the_rate_times_the_time_of_d",),
+    ),
+)
+
 MUTATIONS += (  # behaviours that once passed every test covering their code (tests/test_behaviours_*.py)
     Mutation(
         "FFBSi weighs a backward step with the input of the step it leaves",

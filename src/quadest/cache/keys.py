@@ -35,6 +35,7 @@ from typing import Any
 import quadest
 from quadest.numerics.square_root import kernel_backend
 from quadest.replay.data import log_path
+from quadest.simulation.recorded import recording_files
 
 FORMAT = 1  # bump when the layout of a cached value changes
 RESULT_NEUTRAL = (
@@ -161,11 +162,16 @@ def data_material(resolved: dict[str, Any]) -> dict[str, Any]:
     """What determines the Monte Carlo data: the resolved config ``resolved`` (a plain dict, as
     ``OmegaConf.to_container(cfg, resolve=True)`` gives it) without :data:`NOT_DATA_KEYS`; for a
     replay (``source``) also the digest of the log file's bytes, so a changed log at the same path
-    misses."""
+    misses; for data read from a file or folder (``model.recording``) the digest of the files it is
+    read from."""
     material = without_paths(copy.deepcopy(resolved), NOT_DATA_KEYS)
     if resolved.get("source") is not None:
         path = log_path(resolved["source"].get("path"))
         material["source_log"] = source_digest([path], path.parent)
+    recording = (resolved.get("model") or {}).get("recording")
+    if recording is not None:
+        files = recording_files(recording)
+        material["recording_files"] = source_digest(files, Path(files[0]).anchor)
     return material
 
 

@@ -169,7 +169,9 @@ class AttitudeModelConf(QuadrotorFlightConf):
     """``model=attitude`` (:mod:`quadest.models.attitude`): quaternion, gyro and accelerometer
     biases on the shared quadrotor, accelerometer and magnetometer updates (docs/attitude.md).
     The inherited quadrotor keys fly the truth; its ``process_noise``/``initial_std`` groups belong
-    to the quadrotor filters and are not read here (``attitude_process_noise``/``attitude_initial_std`` are)."""
+    to the quadrotor filters and are not read here (``attitude_process_noise``/``attitude_initial_std`` are).
+    ``recording``: null flies the truth; a file or an EuRoC-layout folder (docs/euroc.md) replays its
+    IMU against its reference instead."""
 
     name: str = "attitude"
     known_acceleration: bool = True
@@ -177,6 +179,7 @@ class AttitudeModelConf(QuadrotorFlightConf):
     magnetometer: MagnetometerConf = field(default_factory=MagnetometerConf)
     attitude_process_noise: AttitudeProcessNoiseConf = field(default_factory=AttitudeProcessNoiseConf)
     attitude_initial_std: AttitudeInitialStdConf = field(default_factory=AttitudeInitialStdConf)
+    recording: str | None = None
 
 
 @dataclass
@@ -210,7 +213,8 @@ class InsModelConf(QuadrotorFlightConf):
     camera from ``sensor.gps``/``sensor.barometer``/``sensor.vision``, the magnetometer from
     ``model.magnetometer``). The inherited quadrotor keys fly the truth; ``process_noise`` and
     ``initial_std`` belong to the quadrotor filters (``ins_process_noise``/``ins_initial_std`` are
-    read here)."""
+    read here). ``recording``: null flies the truth; a file or an EuRoC-layout folder
+    (:mod:`quadest.simulation.euroc`) replays its IMU against its reference instead."""
 
     name: str = "ins"
     attitude_chart: str = "rotation_vector"
@@ -218,6 +222,7 @@ class InsModelConf(QuadrotorFlightConf):
     magnetometer: MagnetometerConf = field(default_factory=MagnetometerConf)
     ins_process_noise: InsProcessNoiseConf = field(default_factory=InsProcessNoiseConf)
     ins_initial_std: InsInitialStdConf = field(default_factory=InsInitialStdConf)
+    recording: str | None = None
 
 
 @dataclass

@@ -75,6 +75,14 @@ def log(q: np.ndarray) -> np.ndarray:
     return factor * v
 
 
+def slerp(p: np.ndarray, q: np.ndarray, fraction: np.ndarray) -> np.ndarray:
+    """Spherical linear interpolation from ``p`` (``fraction`` 0) to ``q`` (``fraction`` 1) along
+    the shorter arc: ``p ⊗ exp(τ log(p* ⊗ q))`` (Shoemake 1985, "Animating rotation with quaternion
+    curves", SIGGRAPH; Solà 2017 §2.7), for quaternions (..., 4) and fractions (...,).
+    ``log`` takes the ``w ≥ 0`` representative, so the arc is at most π."""
+    return multiply(p, exp(np.asarray(fraction)[..., None] * log(multiply(conjugate(p), q))))
+
+
 def rotation_matrix(q: np.ndarray) -> np.ndarray:
     """Body-to-earth rotation matrix (..., 3, 3) of unit quaternions (..., 4) (Solà eq. 115)."""
     w, x, y, z = np.moveaxis(q, -1, 0)

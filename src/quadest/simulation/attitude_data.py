@@ -16,11 +16,20 @@ the magnetometer, and bind :class:`~quadest.models.attitude.AttitudeFilterModel`
   would leave ``½ ω̇ T²`` ≈ 1e-4 rad, correlated from step to step.
 - x0 = truth ⊞ L0 w with ``w ~ N(0, I)`` from each run's ``"initial"`` stream (the quaternion
   moves on the manifold, not by adding to its components).
+
+With ``model.recording`` (a file or an EuRoC-layout folder with the IMU and the 16-column INS
+truth, :func:`~quadest.simulation.recorded.read_imu_recordings`, docs/euroc.md) nothing is flown:
+the recorded gyro (averaged over each step as above) is the input, the recorded accelerometer the
+measurement, the reference's attitude and biases the truth, and the magnetometer measures the
+reference's attitude (its own streams: a synthetic magnetometer on a recorded flight). With
+``known_acceleration`` the earth-frame acceleration is the reference velocity's derivative (central
+differences, one-sided at the ends); the triads are taken as nominal.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import numpy as np
 
@@ -40,6 +49,7 @@ from quadest.sensors.mimu import TriadErrors, TriadSpec, draw_triad_errors, meas
 from quadest.sensors.noise_laws import noise_law_from_config
 from quadest.simulation.aiding import sensor_context
 from quadest.simulation.quadrotor_data import fly_scenario
+from quadest.simulation.recorded import IMU_STEP_RTOL, read_imu_recordings, recorded_data, resolve_recording
 from quadest.simulation.spec import ModelSpec
 
 
@@ -76,10 +86,29 @@ def validate_attitude(settings: DataSettings) -> None:
     for key in ("attitude", "gyro_bias", "accel_bias"):
         std = getattr(m.attitude_initial_std, key)
         require_positive(f"model.attitude_initial_std.{key}", std, "must be > 0 (P0 from it)")
+    if m.recording is not None:
+        resolve_recording(m.recording)
+
+
+def _filter_noise(settings: DataSettings, gyro: TriadSpec, accel: TriadSpec) -> tuple[np.ndarray, float]:
+    """``(Q, R_acc per axis)`` of the filters (module docstring)."""
+    m, T = settings.model, float(settings.sample_period)
+    q_att = gyro.white_noise**2 * T + float(m.attitude_process_noise.attitude) ** 2
+    Q = np.diag([q_att] * 3 + [gyro.bias_random_walk**2 * T] * 3 + [accel.bias_random_walk**2 * T] * 3)
+    r_acc = accel.white_noise_std(T) ** 2 + (0.0 if m.known_acceleration else float(m.acceleration_std) ** 2)
+    return float(m.attitude_process_noise.inflation) * Q, r_acc
+
+
+def _initial_covariance(settings: DataSettings) -> np.ndarray:
+    s0 = settings.model.attitude_initial_std
+    return np.diag([float(s0.attitude) ** 2] * 3 + [float(s0.gyro_bias) ** 2] * 3 + [float(s0.accel_bias) ** 2] * 3)
 
 
 def build_attitude_data(settings: DataSettings) -> MonteCarloData:
-    """Fly the scenario for ``settings.runs`` runs and record what the attitude filters see."""
+    """Fly the scenario for ``settings.runs`` runs and record what the attitude filters see (or,
+    with ``model.recording``, :func:`build_recorded_attitude_data`)."""
+    if settings.model.recording is not None:
+        return build_recorded_attitude_data(settings)
     mcfg, scfg = settings.model, settings.sensor
     runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
     streams = run_streams(seed, runs, settings.first_run)
@@ -108,10 +137,7 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     known = bool(mcfg.known_acceleration)
     a_e = np.einsum("bkij,bkj->bki", rotation(angles), truth.specific_force) + g_e if known else np.zeros_like(angles)
 
-    inflation = float(mcfg.attitude_process_noise.inflation)
-    q_att = gyro.white_noise**2 * T + float(mcfg.attitude_process_noise.attitude) ** 2
-    Q = inflation * np.diag([q_att] * 3 + [gyro.bias_random_walk**2 * T] * 3 + [accel.bias_random_walk**2 * T] * 3)
-    r_acc = accel.white_noise_std(T) ** 2 + (0.0 if known else float(mcfg.acceleration_std) ** 2)
+    Q, r_acc = _filter_noise(settings, gyro, accel)
     assumed = (gyro_errors, accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
     model = AttitudeFilterModel(
         T,
@@ -125,8 +151,7 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
         batch_size=runs,
     )
 
-    s0 = mcfg.attitude_initial_std
-    P0 = np.diag([float(s0.attitude) ** 2] * 3 + [float(s0.gyro_bias) ** 2] * 3 + [float(s0.accel_bias) ** 2] * 3)
+    P0 = _initial_covariance(settings)
     offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 9)), P0, streams["initial"])
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
@@ -147,6 +172,53 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
         labels=labels,
         sensors={"mag": z_mag},
     )
+
+
+def build_recorded_attitude_data(settings: DataSettings) -> MonteCarloData:
+    """The recordings of ``model.recording`` as the attitude filters' data (module docstring).
+
+    Raises:
+        ConfigError: ``model.recording`` is not an IMU recording
+            (:func:`~quadest.simulation.recorded.read_imu_recordings`) or does not fit the job
+            (:func:`~quadest.simulation.recorded.recorded_data`).
+    """
+    mcfg, scfg = settings.model, settings.sensor
+    runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
+    recordings = read_imu_recordings(settings)
+    streams = run_streams(seed, runs, settings.first_run)
+    time = recordings[0].time
+    reference = np.stack([r.truth for r in recordings])
+    noise = float(mcfg.measurement_noise_inflation)
+    sensed = dataclasses.replace(settings, duration=float(time[-1] - time[0]))
+    magnetometer = Magnetometer(mcfg.magnetometer, sensor_context(sensed, mcfg.calibrated, noise))
+    motion = TrueMotion(time - time[0], reference[..., 4:7], reference[..., 7:10], reference[..., 0:4])
+    z_mag = magnetometer.simulate(motion, {name: streams[name] for name in Magnetometer.stream_names()})
+    known = bool(mcfg.known_acceleration)
+    a_e = np.gradient(reference[..., 7:10], time, axis=1) if known else np.zeros_like(reference[..., 7:10])
+    recordings = [
+        dataclasses.replace(
+            r,
+            measurements=r.inputs[:, 3:6],
+            truth=np.concatenate([r.truth[:, 0:4], r.truth[:, 10:16]], axis=-1),  # [q, b_g, b_a]
+            inputs=np.concatenate([interval_average(r.inputs[None, :, 0:3])[0], a], axis=-1),
+        )
+        for r, a in zip(recordings, a_e, strict=True)
+    ]
+    scale = float(scfg.error_scale)
+    Q, r_acc = _filter_noise(settings, triad_spec(scfg.gyro, scale), triad_spec(scfg.accel, scale))
+    model = AttitudeFilterModel(
+        T, np.array([0.0, 0.0, -float(mcfg.gravity)]), magnetometer.mag_earth, Q, noise * r_acc * np.eye(3),
+        magnetometer.noise_covariance(), None, None, magnetometer.assumed_errors(), batch_size=runs,
+    )  # fmt: skip
+    P0 = _initial_covariance(settings)
+    offsets = draw_initial_estimates(np.zeros((runs, 9)), P0, streams["initial"])
+    x0 = model.boxplus(np.stack([r.truth[0] for r in recordings]), offsets)
+    labels = {
+        "model": mcfg.name, "recording": str(mcfg.recording), "known_acceleration": known, "sensor": scfg.name,
+        "mag_rate": float(mcfg.magnetometer.rate), **recordings[0].notes,
+    }  # fmt: skip
+    return recorded_data(settings, model, recordings, x0, P0, starts_at_first_sample=True, step_rtol=IMU_STEP_RTOL,
+                         sensors={"mag": z_mag}, labels=labels)  # fmt: skip
 
 
 MODEL = ModelSpec(  # n_err = 9: attitude error, gyro and accelerometer biases

@@ -22,9 +22,21 @@ aiding sensors, and bind :class:`~quadest.models.ins.InsFilterModel` to the runs
   variance plus the variance of the errors the filter does not estimate (GPS drift, barometer
   bias and mid-run drift, magnetometer hard-iron drift), times ``measurement_noise_inflation``.
 - x0 = truth ⊞ L0 w with ``w ~ N(0, I)`` from each run's ``"initial"`` stream.
+
+With ``model.recording`` (a file or an EuRoC-layout folder, :mod:`quadest.simulation.recorded`,
+:mod:`quadest.simulation.euroc`) nothing is flown: each recording is one run whose inputs are the
+IMU samples ``[ω̃, f̃]`` as measured (instantaneous; turned into the means over the following step
+by :func:`interval_means`, as the simulated IMU) and whose truth is the 16-column INS state of the
+reference. Its first ``duration`` seconds are used (all of it when shorter), its first sample is the
+filters' start (:func:`~quadest.simulation.recorded.recorded_data` with ``starts_at_first_sample``),
+the triads are taken as nominal (a real IMU's scale errors are unknown), ``Q`` and ``P0`` come from
+the same keys as above, and the aiding sensors of ``model.aiding`` measure the reference (each from
+its own streams: synthetic fixes of a recorded flight).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -32,7 +44,7 @@ from quadest.config.ranges import require_non_negative, require_positive
 from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.models.config_checks import validate_quadrotor
-from quadest.models.ins import CHARTS, InsFilterModel, ins_layout
+from quadest.models.ins import ATT, CHARTS, POS, VEL, InsFilterModel, ins_layout
 from quadest.models.quadrotor_config import triad_spec
 from quadest.models.schemas import InsModelConf
 from quadest.montecarlo import MonteCarloData
@@ -45,6 +57,7 @@ from quadest.sensors.noise_laws import noise_law_from_config
 from quadest.simulation.aiding import measure_aiding, sensor_context, validate_aiding
 from quadest.simulation.attitude_data import _measure_with_truth_bias
 from quadest.simulation.quadrotor_data import fly_scenario
+from quadest.simulation.recorded import IMU_STEP_RTOL, read_imu_recordings, recorded_data, resolve_recording
 from quadest.simulation.spec import ModelSpec
 
 
@@ -69,6 +82,8 @@ def validate_ins(settings: DataSettings) -> None:
     for key in ("attitude", "position", "velocity", "gyro_bias", "accel_bias"):
         require_positive(f"model.ins_initial_std.{key}", getattr(m.ins_initial_std, key), "must be > 0 (P0 from it)")
     validate_aiding(settings, ins_layout(platform_input=True))
+    if m.recording is not None:
+        resolve_recording(m.recording)
 
 
 def process_noise(gyro, accel, extra, sample_period: float) -> np.ndarray:
@@ -88,7 +103,10 @@ def process_noise(gyro, accel, extra, sample_period: float) -> np.ndarray:
 
 
 def build_ins_data(settings: DataSettings) -> MonteCarloData:
-    """Fly the scenario for ``settings.runs`` runs and record what the INS filters see."""
+    """Fly the scenario for ``settings.runs`` runs and record what the INS filters see (or, with
+    ``model.recording``, :func:`build_recorded_ins_data`)."""
+    if settings.model.recording is not None:
+        return build_recorded_ins_data(settings)
     mcfg, scfg = settings.model, settings.sensor
     runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
     streams = run_streams(seed, runs, settings.first_run)
@@ -126,9 +144,7 @@ def build_ins_data(settings: DataSettings) -> MonteCarloData:
     )  # fmt: skip
     inputs = [z_gyro, z_acc] + ([] if platform is None else [np.broadcast_to(platform, z_gyro.shape)])
 
-    s0 = mcfg.ins_initial_std
-    groups = ("attitude", "position", "velocity", "gyro_bias", "accel_bias")
-    P0 = np.diag(np.repeat([float(getattr(s0, k)) ** 2 for k in groups], 3))
+    P0 = _initial_covariance(settings)
     offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 15)), P0, streams["initial"])
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
@@ -150,6 +166,48 @@ def build_ins_data(settings: DataSettings) -> MonteCarloData:
         labels=labels,
         sensors=records,
     )
+
+
+def _initial_covariance(settings: DataSettings) -> np.ndarray:
+    s0 = settings.model.ins_initial_std
+    groups = ("attitude", "position", "velocity", "gyro_bias", "accel_bias")
+    return np.diag(np.repeat([float(getattr(s0, k)) ** 2 for k in groups], 3))
+
+
+def build_recorded_ins_data(settings: DataSettings) -> MonteCarloData:
+    """The recordings of ``model.recording`` as the INS filters' data (module docstring).
+
+    Raises:
+        ConfigError: ``model.recording`` is not an IMU recording
+            (:func:`~quadest.simulation.recorded.read_imu_recordings`) or does not fit the job
+            (:func:`~quadest.simulation.recorded.recorded_data`).
+    """
+    mcfg, scfg = settings.model, settings.sensor
+    runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
+    recordings = [
+        dataclasses.replace(r, inputs=interval_means(r.inputs[None])[0]) for r in read_imu_recordings(settings)
+    ]
+    streams = run_streams(seed, runs, settings.first_run)
+    truth = np.stack([r.truth for r in recordings])
+    duration = float(recordings[0].time[-1] - recordings[0].time[0])
+    sensed = dataclasses.replace(settings, duration=duration)
+    motion = TrueMotion(recordings[0].time - recordings[0].time[0], truth[..., POS], truth[..., VEL], truth[..., ATT])
+    records, aiding = measure_aiding(
+        sensed, motion, streams, ins_layout(), sensor_context(sensed, mcfg.calibrated, mcfg.measurement_noise_inflation)
+    )
+    scale = float(scfg.error_scale)
+    gyro, accel = triad_spec(scfg.gyro, scale), triad_spec(scfg.accel, scale)
+    Q = process_noise(gyro, accel, mcfg.ins_process_noise, T)
+    model = InsFilterModel(T, float(mcfg.gravity), Q, aiding, chart=mcfg.attitude_chart, batch_size=runs)
+    P0 = _initial_covariance(settings)
+    offsets = draw_initial_estimates(np.zeros((runs, 15)), P0, streams["initial"])
+    x0 = model.boxplus(truth[:, 0], offsets)
+    labels = {
+        "model": mcfg.name, "recording": str(mcfg.recording), "sensor": scfg.name,
+        "attitude_chart": mcfg.attitude_chart, "aiding": "+".join(mcfg.aiding), **recordings[0].notes,
+    }  # fmt: skip
+    return recorded_data(settings, model, recordings, x0, P0, starts_at_first_sample=True, step_rtol=IMU_STEP_RTOL,
+                         sensors=records, labels=labels)  # fmt: skip
 
 
 MODEL = ModelSpec(  # n_err = 15
