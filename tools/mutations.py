@@ -876,6 +876,34 @@ MUTATIONS = (
         "        except ZeroDivisionError as exc:  # a configuration the rule cannot serve",
         ("tests/test_gauss_hermite_grid.py::test_a_grid_too_large_only_when_augmented_fails_the_job",),
     ),
+    Mutation(
+        "seed 001's flown truth keeps the process noise",
+        "src/quadest/simulation/seed001_rates_data.py",
+        "        process = np.zeros((runs, K1, 3))",
+        '        process = np.stack([rng.standard_normal((K1, 3)) for rng in streams["process"]]) * 0.3',
+        ("tests/test_seed001_flown_truth.py::test_the_flown_truth_has_no_process_noise",),
+    ),
+    Mutation(
+        "seed 001's truth options swapped (the default loses its process noise)",
+        "src/quadest/simulation/seed001_rates_data.py",
+        '    if m.truth == "flown":',
+        '    if m.truth != "flown":',
+        ("tests/test_seed001_rates.py::test_truth_is_the_filter_model_driven_by_the_process_streams_draws",),
+    ),
+    Mutation(
+        "seed 001's truth driven by the rotor speeds one sample late",
+        "src/quadest/simulation/seed001_rates_data.py",
+        "        rates[:, k] = model.f(rates[:, k - 1][:, None], rotors[:, k - 1])[:, 0] + noise[:, k]",
+        "        rates[:, k] = model.f(rates[:, k - 1][:, None], rotors[:, k])[:, 0] + noise[:, k]",
+        ("tests/test_seed001_flown_truth.py::test_the_flown_truth_is_the_euler_step_of_the_flown_rotor_speeds",),
+    ),
+    Mutation(
+        "seed 001's truth option unchecked (a misspelt value runs the default)",
+        "src/quadest/models/seed001_rates.py",
+        "    if settings.model.truth not in TRUTHS:",
+        "    if settings.model.truth is None:",
+        ("tests/test_seed001_flown_truth.py::test_an_unknown_truth_is_refused_before_any_work",),
+    ),
 )  # fmt: skip
 
 B_SMOOTHING = "tests/test_behaviours_smoothing.py::"
