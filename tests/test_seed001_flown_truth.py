@@ -12,6 +12,7 @@ from helpers import compose_config
 from quadest.app.settings import data_settings
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
+from quadest.evaluation.pcrlb import pcrlb_caption, pcrlb_is_bound
 from quadest.montecarlo.streams import run_streams
 from quadest.simulation.quadrotor_data import fly_scenario
 from quadest.simulation.registry import build_data
@@ -69,6 +70,19 @@ def test_the_flown_truth_is_the_euler_step_of_the_flown_rotor_speeds():
         expected[:, k] = expected[:, k - 1] + T * accel
     np.testing.assert_allclose(data.truth, expected, rtol=1e-12, atol=1e-12)
     assert np.abs(data.truth).max() > 0.5  # the manoeuvre turns the vehicle: the check is not on zeros
+
+
+def test_the_pcrlb_is_called_a_bound_only_where_the_truth_follows_the_filter_model():
+    """The flown rates have no process noise, so the filter model's PCRLB (with its Q) is no floor
+    for them: the EKF's pooled MSE sits well below it (tests/test_seed001_rates.py holds the
+    filters to it on the default truth). The caption under the table and the figure say which."""
+    cfg, data = flown_data(1)
+    assert not pcrlb_is_bound(cfg.model.name, data.labels)
+    assert "not a bound" in pcrlb_caption(cfg.model.name, labels=data.labels)
+    default = build_data(data_settings(compose_config(["experiment=seed001_rates", "runs=2", "duration=0.2"])))
+    assert pcrlb_is_bound(cfg.model.name, default.labels)
+    assert "not a bound" not in pcrlb_caption(cfg.model.name, labels=default.labels)
+    assert not pcrlb_is_bound(cfg.model.name)  # a model whose truth is a setting, asked without its data
 
 
 def test_an_unknown_truth_is_refused_before_any_work():

@@ -201,7 +201,7 @@ MUTATIONS = (
     Mutation(
         "PCRLB called a bound on the quadrotor",
         "src/quadest/evaluation/pcrlb.py",
-        "return spec is not None and spec.pcrlb_is_bound",
+        "return bool(spec.pcrlb_is_bound)",
         "return True",
         (VALIDATION + "test_pcrlb_is_called_a_bound_only_where_it_is_one",),
     ),
@@ -656,7 +656,7 @@ MUTATIONS = (
     Mutation(
         "a model plugin's PCRLB flag ignored (a known list again)",
         "src/quadest/evaluation/pcrlb.py",
-        "return spec is not None and spec.pcrlb_is_bound",
+        "return bool(spec.pcrlb_is_bound)",
         'return model_name in ("linear", "ungm", "seed001_rates")',
         ("tests/test_model_plugins.py::test_the_entry_point_registers_the_model",),
     ),
@@ -903,6 +903,13 @@ MUTATIONS = (
         "    if settings.model.truth not in TRUTHS:",
         "    if settings.model.truth is None:",
         ("tests/test_seed001_flown_truth.py::test_an_unknown_truth_is_refused_before_any_work",),
+    ),
+    Mutation(
+        "seed 001's PCRLB called a bound whatever the truth",
+        "src/quadest/simulation/seed001_rates_data.py",
+        '    return labels.get("truth") == "own_model"',
+        '    return labels.get("truth") is not None',
+        ("tests/test_seed001_flown_truth.py::test_the_pcrlb_is_called_a_bound_only_where_the_truth_follows_the_filter_model",),
     ),
 )  # fmt: skip
 

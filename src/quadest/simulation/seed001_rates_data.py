@@ -5,6 +5,9 @@ measurement."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 
 from quadest.config.settings import DataSettings
@@ -28,6 +31,12 @@ def propagate_rates(model: RateModel, start: np.ndarray, rotors: np.ndarray, noi
     return rates
 
 
+def truth_follows_the_filter_model(labels: Mapping[str, Any]) -> bool:
+    """The PCRLB of the rate model bounds the filters' MSE only for ``model.truth=own_model``,
+    where the rates are driven by the filters' own N(0, Q) process noise; the flown rates have none."""
+    return labels.get("truth") == "own_model"
+
+
 def build_seed001_rates_data(settings: DataSettings) -> MonteCarloData:
     """Fly the scenario for the rotor speeds, drive the rate model from the flown initial rates
     (:func:`propagate_rates`) with N(0, Q·I) process noise from the ``process`` stream
@@ -49,7 +58,7 @@ def build_seed001_rates_data(settings: DataSettings) -> MonteCarloData:
     P0 = float(m.P0) * np.eye(3)
     labels = {
         "model": m.name, "formulation": m.name, "calibrated": True, "sensor": "", "error_scale": np.nan,
-        "scenario": flown.name, "encoder_resolution": np.nan,
+        "scenario": flown.name, "encoder_resolution": np.nan, "truth": m.truth,
     }  # fmt: skip
     return MonteCarloData(
         model, truth.time, rates, np.zeros((runs, K1, 0)), rotors, rates + noise,
@@ -65,5 +74,5 @@ MODEL = ModelSpec(
     lambda _: 3,
     validate_seed001_rates,
     uses_quadrotor_groups=True,
-    pcrlb_is_bound=True,  # model.truth=own_model (default): the filter model's own N(0, Q) process noise
+    pcrlb_is_bound=truth_follows_the_filter_model,
 )
