@@ -36,7 +36,7 @@ def test_truth_is_the_filter_model_driven_by_the_process_streams_draws(seed001):
     increments = np.stack([x[:, k] - model.f(x[:, k - 1][:, None], u[:, k - 1])[:, 0] for k in range(1, x.shape[1])], 1)
     draws = np.stack([rng.standard_normal((x.shape[1], 3)) for rng in run_streams(int(cfg.seed), RUNS)["process"]])
     np.testing.assert_allclose(increments, np.sqrt(float(cfg.model.Q)) * draws[:, 1:], rtol=0, atol=1e-12)
-    assert pcrlb_is_bound(cfg.model.name)
+    assert pcrlb_is_bound(cfg.model.name, data.labels)
 
 
 def test_no_filter_beats_the_pcrlb_beyond_monte_carlo_error(seed001):

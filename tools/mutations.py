@@ -203,7 +203,7 @@ MUTATIONS = (
     Mutation(
         "PCRLB called a bound on the quadrotor",
         "src/quadest/evaluation/pcrlb.py",
-        "return spec is not None and spec.pcrlb_is_bound",
+        "return bool(spec.pcrlb_is_bound)",
         "return True",
         (VALIDATION + "test_pcrlb_is_called_a_bound_only_where_it_is_one",),
     ),
@@ -710,7 +710,7 @@ MUTATIONS = (
     Mutation(
         "a model plugin's PCRLB flag ignored (a known list again)",
         "src/quadest/evaluation/pcrlb.py",
-        "return spec is not None and spec.pcrlb_is_bound",
+        "return bool(spec.pcrlb_is_bound)",
         'return model_name in ("linear", "ungm", "seed001_rates")',
         ("tests/test_model_plugins.py::test_the_entry_point_registers_the_model",),
     ),
@@ -929,6 +929,41 @@ MUTATIONS = (
         "        except ValueError as exc:  # a configuration the rule cannot serve",
         "        except ZeroDivisionError as exc:  # a configuration the rule cannot serve",
         ("tests/test_gauss_hermite_grid.py::test_a_grid_too_large_only_when_augmented_fails_the_job",),
+    ),
+    Mutation(
+        "seed 001's flown truth keeps the process noise",
+        "src/quadest/simulation/seed001_rates_data.py",
+        "        process = np.zeros((runs, K1, 3))",
+        '        process = np.stack([rng.standard_normal((K1, 3)) for rng in streams["process"]]) * 0.3',
+        ("tests/test_seed001_flown_truth.py::test_the_flown_truth_has_no_process_noise",),
+    ),
+    Mutation(
+        "seed 001's truth options swapped (the default loses its process noise)",
+        "src/quadest/simulation/seed001_rates_data.py",
+        '    if m.truth == "flown":',
+        '    if m.truth != "flown":',
+        ("tests/test_seed001_rates.py::test_truth_is_the_filter_model_driven_by_the_process_streams_draws",),
+    ),
+    Mutation(
+        "seed 001's truth driven by the rotor speeds one sample late",
+        "src/quadest/simulation/seed001_rates_data.py",
+        "        rates[:, k] = model.f(rates[:, k - 1][:, None], rotors[:, k - 1])[:, 0] + noise[:, k]",
+        "        rates[:, k] = model.f(rates[:, k - 1][:, None], rotors[:, k])[:, 0] + noise[:, k]",
+        ("tests/test_seed001_flown_truth.py::test_the_flown_truth_is_the_euler_step_of_the_flown_rotor_speeds",),
+    ),
+    Mutation(
+        "seed 001's truth option unchecked (a misspelt value runs the default)",
+        "src/quadest/models/seed001_rates.py",
+        "    if settings.model.truth not in TRUTHS:",
+        "    if settings.model.truth is None:",
+        ("tests/test_seed001_flown_truth.py::test_an_unknown_truth_is_refused_before_any_work",),
+    ),
+    Mutation(
+        "seed 001's PCRLB called a bound whatever the truth",
+        "src/quadest/simulation/seed001_rates_data.py",
+        '    return labels.get("truth") == "own_model"',
+        '    return labels.get("truth") is not None',
+        ("tests/test_seed001_flown_truth.py::test_the_pcrlb_is_called_a_bound_only_where_the_truth_follows_the_filter_model",),
     ),
 )  # fmt: skip
 

@@ -64,7 +64,8 @@ class OpenLoopJob:
         }  # fmt: skip
         head = (f"Per-state RMSE, mean ± std over {int(cfg.runs)} Monte Carlo runs (per-run RMSE over time; diverged "
                 "runs excluded).")  # fmt: skip
-        return Report(tables, fields, arrays, table_caption(head, self.settings.data.model.name, results))
+        caption = table_caption(head, self.settings.data.model.name, results, labels=data.labels)
+        return Report(tables, fields, arrays, caption)
 
     def _figures(
         self, data: MonteCarloData, results: list[EstimatorResult], arrays: dict, bound: np.ndarray, fig_dir: Path

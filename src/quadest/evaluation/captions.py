@@ -11,7 +11,8 @@ filtering recursion) and a smoothed row may go below the column.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from quadest.evaluation.pcrlb import pcrlb_caption
 from quadest.montecarlo.results import EstimatorResult
@@ -28,9 +29,11 @@ def table_caption(
     results: Sequence[EstimatorResult],
     pcrlb_left_out: str | None = None,
     tail: Sequence[str] = (),
+    labels: Mapping[str, Any] | None = None,
 ) -> str:
     """The caption of a job's table: ``head``, the PCRLB line (``pcrlb_left_out``: the sentence
-    saying why the job has no PCRLB column; else what the column is, with the filtering-bound note
-    when ``results`` have smoothed rows), then the lines of ``tail``."""
-    pcrlb = pcrlb_left_out if pcrlb_left_out is not None else pcrlb_caption(model_name, has_smoothed_rows(results))
+    saying why the job has no PCRLB column; else what the column is for data with these ``labels``,
+    with the filtering-bound note when ``results`` have smoothed rows), then the lines of ``tail``."""
+    smoothed = has_smoothed_rows(results)
+    pcrlb = pcrlb_left_out if pcrlb_left_out is not None else pcrlb_caption(model_name, smoothed, labels)
     return "\n".join([head, pcrlb, *tail])

@@ -15,7 +15,8 @@ RMSE at each step. It is a floor, not a target.
 
 The inequality needs the truth to follow the filter model. Each model option declares whether
 its truth does (``pcrlb_is_bound`` of its :class:`~quadest.simulation.spec.ModelSpec`, docs/models.md).
-On ``linear``, ``ungm`` and ``seed001_rates`` (rates driven by the filter model's own process noise) it does:
+On ``linear``, ``ungm`` and ``seed001_rates`` with its default ``model.truth=own_model`` (rates driven
+by the filter model's own process noise) it does:
 the truth is drawn from the filter model with its own Q and R, so the recursion is a bound and
 the tests hold every filter to it within Monte Carlo error. On the quadrotor it does not: the
 truth is the 16-state simulation flown by a controller, with no process noise, and measured by
@@ -59,6 +60,9 @@ of what the mean Jacobian alone gives (docs/ins.md).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 
 from quadest.montecarlo import MonteCarloData
@@ -67,13 +71,18 @@ from quadest.simulation.registry import model_specs
 REGULARISATION = 1e-12  # of R only (module docstring)
 
 
-def pcrlb_is_bound(model_name: str) -> bool:
+def pcrlb_is_bound(model_name: str, labels: Mapping[str, Any] | None = None) -> bool:
     """Whether the PCRLB of ``model=<model_name>`` bounds the filters' MSE (see the module
     docstring): what the option's :class:`~quadest.simulation.spec.ModelSpec` declares
-    (``pcrlb_is_bound``: its truth is drawn from the filter model with its own noise); ``False``
-    for a name no model is registered under."""
+    (``pcrlb_is_bound``: its truth is drawn from the filter model with its own noise), or, where
+    the spec declares it as a function of the data's ``labels``, what it says of these (``False``
+    without labels); ``False`` for a name no model is registered under."""
     spec = model_specs().get(model_name)
-    return spec is not None and spec.pcrlb_is_bound
+    if spec is None:
+        return False
+    if callable(spec.pcrlb_is_bound):
+        return labels is not None and bool(spec.pcrlb_is_bound(labels))
+    return bool(spec.pcrlb_is_bound)
 
 
 SMOOTHED_NOTE = (
@@ -82,12 +91,13 @@ SMOOTHED_NOTE = (
 )
 
 
-def pcrlb_caption(model_name: str, smoothed: bool = False) -> str:
-    """The line printed under the RMSE table that says what its PCRLB column is; with ``smoothed``
+def pcrlb_caption(model_name: str, smoothed: bool = False, labels: Mapping[str, Any] | None = None) -> str:
+    """The line printed under the RMSE table that says what its PCRLB column is (``labels``: the
+    data's, for a model whose truth is a setting, :func:`pcrlb_is_bound`); with ``smoothed``
     (the table has smoothed rows), that the column is the filtering bound, not the smoothers' (their
     Fisher information adds the later measurements', so their bound is lower; Tichavský, Muravchik &
     Nehorai 1998 give the filtering recursion)."""
-    if pcrlb_is_bound(model_name):
+    if pcrlb_is_bound(model_name, labels):
         caption = (
             "PCRLB: the posterior Cramér-Rao bound (the truth follows the filter model), a floor on the pooled RMSE "
             "(rmse_summary.csv)."

@@ -114,7 +114,8 @@ def plot_rmse_vs_time(data: MonteCarloData, results: list[EstimatorResult], boun
     for ax in axes[-min(3, model.n_err) :]:
         ax.set_xlabel("time [s]")
     axes[0].legend(fontsize=7)
-    what = "bound" if pcrlb_is_bound(data.labels.get("model", "")) else "recursion (a reference, not a bound)"
+    bound_here = pcrlb_is_bound(data.labels.get("model", ""), data.labels)
+    what = "bound" if bound_here else "recursion (a reference, not a bound)"
     return _save(fig, f"RMSE over {data.truth.shape[0]} runs against the posterior Cramér-Rao {what}", path)
 
 

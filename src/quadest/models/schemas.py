@@ -127,9 +127,11 @@ class UPFBenchmarkModelConf:
 @dataclass
 class Seed001RatesModelConf(QuadrotorFlightConf):
     """``model=seed001_rates``: seed 001's angular-rate filter on the shared quadrotor
-    (:mod:`quadest.models.seed001_rates`); ``Q``, ``R``, ``P0`` are variances per axis, (rad/s)²."""
+    (:mod:`quadest.models.seed001_rates`); ``Q``, ``R``, ``P0`` are variances per axis, (rad/s)²;
+    ``truth`` is how the true rates are made (:data:`~quadest.models.seed001_rates.TRUTHS`)."""
 
     name: str = "seed001_rates"
+    truth: str = "own_model"
     Q: float = 0.1
     R: float = 0.1
     P0: float = 0.1

@@ -9,16 +9,23 @@ attitude back to level. Here:
   the rotor gyroscopic term and rotational drag, :func:`quadest.quadrotor.dynamics.body_angular_accel`),
   ``x_k = x_{k−1} + T ω̇(x_{k−1}, Ω_{k−1})``, the input the true rotor speeds at the previous sample;
 - measurement: the gyro, ``z = x + n``, ``n ~ N(0, R)``, white noise from the ``measurement`` stream;
-- truth: the seed's model itself, ``x_k = f(x_{k−1}, Ω_{k−1}) + w_k`` with ``w_k ~ N(0, Q)`` from
-  the ``process`` stream (§3.1: process-noise variance Q = 0.1 (rad/s)²), started at the flown
-  rates; the rotor speeds Ω are those of the shared quadrotor flown by the backstepping
-  controller through the configured scenario (``experiment=seed001_rates``: ``attitude_steps``,
-  a manoeuvre of ours — the seed only says "from a disturbed attitude back to level"). Every
-  filter assumes the same ``Q`` and ``R`` the truth is drawn with, so the PCRLB of the filter
-  model is a true bound here (:mod:`quadest.evaluation.pcrlb`).
+- truth, ``model.truth`` (:data:`TRUTHS`), both started at the flown rates and driven by the rotor
+  speeds Ω of the shared quadrotor flown by the backstepping controller through the configured
+  scenario (``experiment=seed001_rates``: ``attitude_steps``, a manoeuvre of ours — the seed only says
+  "from a disturbed attitude back to level"):
 
-Until this truth, the rates were the flown quadrotor's, without process noise, while every filter
-assumed Q = 0.1: every filter then sat *below* the PCRLB printed beside it.
+  - ``own_model`` (default): the seed's model itself, ``x_k = f(x_{k−1}, Ω_{k−1}) + w_k`` with
+    ``w_k ~ N(0, Q)`` from the ``process`` stream (§3.1: process-noise variance Q = 0.1 (rad/s)²).
+    Every filter assumes the same ``Q`` and ``R`` the truth is drawn with, so the EKF is the Bayes
+    filter up to linearisation and the PCRLB of the filter model is a true bound here
+    (:mod:`quadest.evaluation.pcrlb`);
+  - ``flown``: the flown manoeuvre, ``x_k = f(x_{k−1}, Ω_{k−1})`` without process noise: the same
+    Euler step driven by the same deterministic rotor-speed command, the backstepping controller's
+    output along the scenario. This is §3.1's reading "the quadrotor model combined with the
+    backstepping nonlinear control system gives the complete simulated attitude data": the truth
+    is the flight, and only the filters' assumed ``Q`` is a tuning value. The truth then does not
+    follow the filter model's noise, so the PCRLB column is the filter model's recursion, a
+    reference rather than a floor.
 
 The truth and the Monte Carlo data are built by :mod:`quadest.simulation.seed001_rates_data`.
 """
@@ -29,11 +36,13 @@ import numpy as np
 
 from quadest.config.ranges import require_positive
 from quadest.config.settings import DataSettings
+from quadest.errors import ConfigError
 from quadest.models.base import FilterModel
 from quadest.models.config_checks import validate_quadrotor
 from quadest.quadrotor.dynamics import body_angular_accel, body_rate_jacobian, rotor_inputs
 from quadest.quadrotor.params import QuadrotorParams
 
+TRUTHS = ("own_model", "flown")  # model.truth: the filter model with N(0, Q) noise, or the flight without it
 RATES = slice(9, 12)  # body rates p, q, r in the 16-state truth
 ROTORS = slice(12, 16)
 
@@ -76,7 +85,10 @@ class RateModel(FilterModel):
 
 
 def validate_seed001_rates(settings: DataSettings) -> None:
-    """Range checks of ``model=seed001_rates``: the quadrotor's, plus the filters' noise."""
+    """Range checks of ``model=seed001_rates``: the truth option, the quadrotor's, plus the filters'
+    noise."""
+    if settings.model.truth not in TRUTHS:
+        raise ConfigError("model.truth", settings.model.truth, f"one of {list(TRUTHS)}")
     validate_quadrotor(settings)
     for key in ("Q", "R", "P0"):
         require_positive(f"model.{key}", getattr(settings.model, key))

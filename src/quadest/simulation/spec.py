@@ -14,8 +14,9 @@ checks, the PCRLB caption) reads the spec.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from quadest.config.settings import DataSettings
 from quadest.montecarlo import MonteCarloData
@@ -45,7 +46,8 @@ class ModelSpec:
             ``scenario`` groups are checked too.
         pcrlb_is_bound: the truth is drawn from the filter model itself with its own noise, so the
             posterior Cramér–Rao recursion (:mod:`quadest.evaluation.pcrlb`) is a true floor on
-            the MSE; otherwise it is reported as a reference only.
+            the MSE; otherwise it is reported as a reference only. For a model whose truth is a
+            setting, a function of the data's ``labels`` (``MonteCarloData.labels``) saying it.
     """
 
     name: str
@@ -54,7 +56,7 @@ class ModelSpec:
     state_dimension: Callable[[DataSettings], int]
     validate: Callable[[DataSettings], None] = _no_checks
     uses_quadrotor_groups: bool = False
-    pcrlb_is_bound: bool = False
+    pcrlb_is_bound: bool | Callable[[Mapping[str, Any]], bool] = False
 
 
 def spec_problems(spec: object) -> list[str]:
