@@ -146,12 +146,10 @@ MUTATIONS = (
     Mutation(
         "the closed loop bypasses the result cache",
         "src/quadest/app/pipeline.py",
-        "    cache = JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n",
-        "    cache = (\n"
-        "        JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n"
-        '        if exp.loop == "open"\n'
-        "        else JobCache(None, None)\n"
-        "    )\n",
+        "    return JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n",
+        '    if exp.loop != "open":\n'
+        "        return JobCache(None, None)\n"
+        "    return JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n",
         (PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[truth]",
          PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[estimate]"),
     ),
