@@ -146,12 +146,10 @@ MUTATIONS = (
     Mutation(
         "the closed loop bypasses the result cache",
         "src/quadest/app/pipeline.py",
-        "    cache = JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n",
-        "    cache = (\n"
-        "        JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n"
-        '        if exp.loop == "open"\n'
-        "        else JobCache(None, None)\n"
-        "    )\n",
+        "    return JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n",
+        '    if exp.loop != "open":\n'
+        "        return JobCache(None, None)\n"
+        "    return JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)\n",
         (PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[truth]",
          PIPELINE + "test_a_closed_loop_job_is_served_from_the_cache[estimate]"),
     ),
@@ -1384,6 +1382,42 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         'sub = metrics[metrics["estimator"] == name]',
         'sub = metrics[metrics["estimator"] == name]; sub = sub.assign(run=sub.groupby("state").cumcount())',
         (CROSS_JOB + "test_runs_are_paired_by_their_index_not_by_their_order_in_the_file",),
+    ),
+)  # fmt: skip
+
+PYTHON_API = "tests/test_python_api.py::"
+MUTATIONS += (  # the Python API (docs/python-api.md): the command's numbers, one-line errors, a light import
+    Mutation(
+        "the Python API's data drawn from the next seed",
+        "src/quadest/app/python_api.py",
+        "    return job_cache(config.settings, config.composed).data(job.make_data)[0]\n",
+        "    settings = config.settings.data\n"
+        '    return __import__("quadest.simulation.registry", fromlist=["build_data"]).build_data(\n'
+        '        __import__("dataclasses").replace(settings, seed=settings.seed + 1)\n'
+        "    )\n",
+        (PYTHON_API + "test_the_api_gives_the_command_s_per_run_rmse",),
+    ),
+    Mutation(
+        "the Python API lets Hydra's multi-line composition errors through",
+        "src/quadest/app/python_api.py",
+        "    except (HydraException, OmegaConfBaseException) as exc:\n",
+        "    except ConfigError as exc:\n",
+        (PYTHON_API + "test_a_bad_override_is_one_config_error_naming_the_key[duration=long-duration]",
+         PYTHON_API + "test_a_bad_override_is_one_config_error_naming_the_key[model=nosuch-model]"),
+    ),
+    Mutation(
+        "the Python API's error for a missing group option names no key",
+        "src/quadest/app/python_api.py",
+        "        return ConfigError(missing[1].replace(\"/\", \".\"), missing[2], message)\n",
+        "        return ConfigError(\"overrides\", overrides, message)\n",
+        (PYTHON_API + "test_a_bad_override_is_one_config_error_naming_the_key[model=nosuch-model]",),
+    ),
+    Mutation(
+        "import quadest loads the application layer",
+        "src/quadest/__init__.py",
+        '__version__ = "0.1.0"\n',
+        '__version__ = "0.1.0"\nfrom quadest.app import python_api  # noqa: E402, F401\n',
+        (PYTHON_API + "test_import_quadest_stays_light",),
     ),
 )  # fmt: skip
 

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 
 from quadest.app.estimator_runs import OnData
-from quadest.app.pipeline import Finished, Report
+from quadest.app.pipeline import Finished, Report, TableRows
 from quadest.app.settings import JobSettings
 from quadest.evaluation.captions import table_caption
-from quadest.evaluation.job_tables import metric_tables
+from quadest.evaluation.job_tables import MetricTables, metric_tables
 from quadest.evaluation.metrics import convergence_table
 from quadest.evaluation.pcrlb import pcrlb_variances
 from quadest.evaluation.plotting import (
@@ -45,8 +45,7 @@ class OpenLoopJob:
         cfg, data, out_dir = self.experiment, finished.data, finished.out_dir
         results = finished.rows.results
         bound = finished.derived("pcrlb", lambda: pcrlb_variances(data))
-        labels = {"seed": int(cfg.seed), "runs": int(cfg.runs)}
-        tables = metric_tables(results, data, finished.rows.params, labels, bound, cfg.metrics)
+        tables = self.tables(data, finished.rows, bound)
         if data.model.bias_states:
             convergence_table(results, data).to_csv(out_dir / "convergence.csv", index=False)
         arrays = {}
@@ -66,6 +65,14 @@ class OpenLoopJob:
                 "runs excluded).")  # fmt: skip
         caption = table_caption(head, self.settings.data.model.name, results, labels=data.labels)
         return Report(tables, fields, arrays, caption)
+
+    def tables(self, data: MonteCarloData, rows: TableRows, bound: np.ndarray) -> MetricTables:
+        """The metric tables of ``rows`` (:func:`~quadest.app.pipeline.table_rows` of the results on
+        ``data``), labelled with the seed and the runs; ``bound`` the PCRLB
+        (:func:`~quadest.evaluation.pcrlb.pcrlb_variances` of ``data``)."""
+        cfg = self.experiment
+        labels = {"seed": int(cfg.seed), "runs": int(cfg.runs)}
+        return metric_tables(rows.results, data, rows.params, labels, bound, cfg.metrics)
 
     def _figures(
         self, data: MonteCarloData, results: list[EstimatorResult], arrays: dict, bound: np.ndarray, fig_dir: Path

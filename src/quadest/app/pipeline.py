@@ -159,7 +159,7 @@ def run_pipeline(
     (``_after_table``) for the CLI."""
     out_dir = start_job(cfg, out_dir)
     exp = job.experiment
-    cache = JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)
+    cache = job_cache(job, cfg)
     progress = Progress.of(exp)
     progress.line(f"making the data: {exp.runs} runs of {exp.duration:g} s at sample_period={exp.sample_period:g} s")
     data, data_from_cache = cache.data(kind.make_data) if kind.caches_data else (kind.make_data(), False)
@@ -168,6 +168,14 @@ def run_pipeline(
     results, from_cache = run_estimators(kind.work(data), exp.estimator, cache, settings, int(exp.workers),
                                          progress.estimator_done(len(exp.estimator)))  # fmt: skip
     return finish_job(kind, job, out_dir, overrides, Ran(data, data_from_cache, results, from_cache, cache.derived))
+
+
+def job_cache(job: JobSettings, cfg: DictConfig) -> JobCache:
+    """The result cache of the job with settings ``job`` of the validated config ``cfg``: its data
+    under the data key of ``cfg`` (:func:`quadest.app.settings.data_key`), none if ``cache.enabled``
+    is false."""
+    exp = job.experiment
+    return JobCache.for_job(exp.cache, data_key(cfg) if exp.cache.enabled else None)
 
 
 def start_job(cfg: DictConfig, out_dir: Path) -> Path:
@@ -197,14 +205,18 @@ class Ran:
     derived: Callable[[str, Callable[[], Any]], Any]
 
 
+def estimator_params(nodes: dict[str, dict]) -> dict[str, dict]:
+    """Each estimator's parameters in the tables and ``summary.json``: label → its ``kind`` and
+    every parameter of its resolved config node ``nodes[label]``."""
+    return {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
+
+
 def finish_job(kind: JobKind, job: JobSettings, out_dir: Path, overrides: list[str] | None, ran: Ran) -> dict:
     """The report of a job that has run (:func:`run_pipeline`): the tables, ``timeseries.npz`` and
     ``summary.json`` written, the summary returned with its printed parts."""
     exp = job.experiment
-    nodes = exp.estimator
-    params = {label: {"kind": node.get("kind", label), **estimator_parameters(node)} for label, node in nodes.items()}
     saved_runs = run_settings(job, int(exp.runs)).saved_runs
-    rows = table_rows(ran.results, params, ran.from_cache)
+    rows = table_rows(ran.results, estimator_params(exp.estimator), ran.from_cache)
     report = kind.report(Finished(out_dir, ran.data, ran.results, rows, saved_runs, ran.derived))
     write_tables(out_dir, with_cache_column(report.tables, rows.from_cache))
     if report.series:

@@ -32,11 +32,13 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-import quadest
 from quadest.numerics.square_root import kernel_backend
 from quadest.replay.data import log_path
 from quadest.simulation.recorded import recording_files
 
+PACKAGE = Path(__file__).parent.parent
+"""The folder of the quadest package this module belongs to (not ``quadest.__file__``: no layer
+imports the package root, which sits above them all, docs/layout.md)."""
 FORMAT = 1  # bump when the layout of a cached value changes
 RESULT_NEUTRAL = (
     "progress",
@@ -109,7 +111,7 @@ def package_version(root: Path) -> str:
 def code_version() -> str:
     """:func:`package_version` of the installed quadest package, read once per process (the code
     this process runs). Works outside git and in a dirty tree."""
-    return package_version(Path(quadest.__file__).parent)
+    return package_version(PACKAGE)
 
 
 @cache
