@@ -19,7 +19,7 @@ from scipy import stats
 
 from helpers import compose_config
 from quadest.app import sizing
-from quadest.app.cli import precheck
+from quadest.app.cli import failure_note, precheck
 from quadest.app.job import run_job
 from quadest.app.validate import validate
 from quadest.errors import ConfigError
@@ -275,3 +275,14 @@ def test_a_smoothers_backward_pass_counts_in_the_size():
     """The K transitions' gains and residuals of each smoother, 2 K B n² floats (docs/smoothers.md)."""
     base = sizing.job_bytes(10, 101, 4, 2, 1, 3)
     assert sizing.job_bytes(10, 101, 4, 2, 1, 3, smoothers=1) - base == 8 * 2 * 100 * 10 * 4 * 4
+
+
+def test_the_summary_line_says_why_an_estimators_runs_were_flagged():
+    """An estimator that could not run at all (every run flagged with one exception's text, as
+    :func:`quadest.montecarlo.results.failed_result` records it) prints that text, not a bare
+    "N of N runs diverged"; a genuine divergence prints its first flagged run's reason; none, nothing."""
+    crashed = {"failure_reasons": {"0": "RuntimeError: exploded", "1": "RuntimeError: exploded"}}
+    assert failure_note(crashed, 2) == " (every run: RuntimeError: exploded)"
+    diverged = {"failure_reasons": {"7": "state bound exceeded at step 40", "3": "non-finite state at step 12"}}
+    assert failure_note(diverged, 10) == " (run 3: non-finite state at step 12)"
+    assert failure_note({"failure_reasons": {}}, 5) == ""

@@ -77,6 +77,13 @@ FAST_PF = "tests/test_particle_fast_mode.py::"
 
 MUTATIONS = (
     Mutation(
+        "an estimator that could not run prints as a plain divergence",
+        "src/quadest/app/cli.py",
+        'return f" (every run: {reasons[first][:160]})"',
+        'return ""',
+        (VISIBLE + "test_the_summary_line_says_why_an_estimators_runs_were_flagged",),
+    ),
+    Mutation(
         "the runner never streams a step into the metric parts",
         "src/quadest/runner.py",
         "            accumulator.step(view)\n",

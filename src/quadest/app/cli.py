@@ -82,7 +82,8 @@ def _main(cfg: DictConfig) -> float | None:
             if m
             else "NIS per sensor " + ", ".join(f"{s} {_fmt(v)}" for s, v in est.get("nis_by_sensor", {}).items())
         )
-        print(f"  {name:>8s}: {est['diverged']} of {runs} runs diverged, mean NEES {_fmt(est['mean_nees'])} "
+        print(f"  {name:>8s}: {est['diverged']} of {runs} runs diverged{failure_note(est, runs)}, "
+              f"mean NEES {_fmt(est['mean_nees'])} "
               f"({n} dof, {_pct(est['nees_in_band'])} of steps in the 95% band), {nis}, "
               f"{_fmt(est['step_time_us'], 1)} us/step/run"
               f"{' (from the cache)' if est['from_cache'] else ''}")  # fmt: skip
@@ -106,6 +107,19 @@ def _fmt(value: float | None, digits: int = 2) -> str:
 
 def _pct(value: float | None) -> str:
     return "n/a" if value is None else f"{100 * value:.0f}%"
+
+
+def failure_note(estimator: dict, runs: int) -> str:
+    """Why an estimator's runs were flagged, for its summary line ('' when none was): the one reason
+    of an estimator that could not run at all (an exception, a worker that died), else the first
+    flagged run's, so that an error never reads as a plain divergence."""
+    reasons = estimator.get("failure_reasons") or {}
+    if not reasons:
+        return ""
+    first = min(reasons, key=int)
+    if len(reasons) == runs and len(set(reasons.values())) == 1:
+        return f" (every run: {reasons[first][:160]})"
+    return f" (run {first}: {reasons[first][:160]})"
 
 
 def _record_failure(out_dir: Path, reason: str) -> None:
