@@ -903,6 +903,13 @@ MUTATIONS = (
         ("tests/test_orphans.py::test_killing_a_job_kills_its_estimator_workers",),
     ),
     Mutation(
+        "a sweep's joblib workers outlive a killed sweep",
+        "src/quadest/app/cli.py",
+        "    watch_parent()  # a launcher's worker (joblib) dies with the sweep's main process",
+        "    pass",
+        ("tests/test_orphans.py::test_killing_a_joblib_sweep_kills_its_launchers_workers",),
+    ),
+    Mutation(
         "an install inside a clone reports the clone's commit",
         "src/quadest/app/provenance.py",
         'return _git("ls-files", "--error-unmatch", Path(__file__).name) is not None',
