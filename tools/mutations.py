@@ -866,6 +866,27 @@ MUTATIONS = (
         (VISIBLE + "test_an_estimator_refusing_its_configuration_fails_the_job_not_its_runs",),
     ),
     Mutation(
+        "an output folder without write permission passes the check",
+        "src/quadest/app/cli.py",
+        "    if not os.access(existing, os.W_OK | os.X_OK):",
+        "    if not os.access(existing, os.F_OK):",
+        (VISIBLE + "test_an_output_folder_that_cannot_be_written_is_refused",),
+    ),
+    Mutation(
+        "a job up to twice the machine's memory passes the size check",
+        "src/quadest/app/sizing.py",
+        "    if need > have:",
+        "    if need > 2 * have:",
+        (VISIBLE + "test_a_job_one_byte_above_the_machines_memory_is_refused",),
+    ),
+    Mutation(
+        "a replayed log shorter than duration replays without a word",
+        "src/quadest/replay/data.py",
+        "    if math.isfinite(settings.duration) and held < settings.duration:",
+        "    if math.isfinite(settings.duration) and held > settings.duration:",
+        (VISIBLE + "test_a_log_shorter_than_the_duration_is_named",),
+    ),
+    Mutation(
         "a sweep with a failed cell exits 0",
         "src/quadest/app/cli.py",
         "        sys.exit(SWEEP_FAILED)",
