@@ -208,6 +208,13 @@ MUTATIONS = (
         (VALIDATION + "test_pcrlb_is_called_a_bound_only_where_it_is_one",),
     ),
     Mutation(
+        "PCRLB transition read with the first step's input at every step",
+        "src/quadest/evaluation/pcrlb.py",
+        "        u_prev = u_now\n",
+        "",
+        (PCRLB + "test_the_transition_into_step_k_is_read_with_the_input_of_step_k_minus_1",),
+    ),
+    Mutation(
         "PCRLB measurement information read with the previous step's input",
         "src/quadest/evaluation/pcrlb.py",
         "H = model.H_err(data.truth[:, k], u_now, sensor)",
