@@ -938,6 +938,13 @@ MUTATIONS = (
         ("tests/test_orphans.py::test_killing_a_joblib_sweep_kills_its_launchers_workers",),
     ),
     Mutation(
+        "a checkout's run-time dirty flag ignores edits to src/",
+        "src/quadest/app/provenance.py",
+        '"--", ":/src", ":/conf", ":/experiments")',
+        '"--", ":/conf", ":/experiments")',
+        ("tests/test_provenance.py::test_a_checkout_with_edited_code_says_so_at_run_time",),
+    ),
+    Mutation(
         "an install inside a clone reports the clone's commit",
         "src/quadest/app/provenance.py",
         'return _git("ls-files", "--error-unmatch", Path(__file__).name) is not None',
@@ -1070,6 +1077,13 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "fieller_interval(numerator[:, None], denominator[:, None]",
         "fieller_interval(numerator[:, None], denominator[::-1, None]",
         (B_STATISTICS + "test_the_particle_count_intervals_pair_each_runs_numerator_and_denominator",),
+    ),
+    Mutation(
+        "a ranking row's flipped interval keeps its ends unswapped",
+        "src/quadest/aggregate/ranking.py",
+        "            lo, hi = min(lo, hi), max(lo, hi)\n",
+        "",
+        (B_STATISTICS + "test_a_ranking_rows_interval_is_ordered_and_holds_its_value_in_either_order",),
     ),
     Mutation(
         'a ranking step signed by the reference instead of the estimator',
