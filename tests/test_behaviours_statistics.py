@@ -159,6 +159,18 @@ def test_a_ranking_steps_sign_and_verdict_do_not_depend_on_the_estimator_order()
         assert sign == (1.0 if reversed_step else -1.0), key
 
 
+def test_a_ranking_rows_interval_is_ordered_and_holds_its_value_in_either_order():
+    """A step whose better filter is listed later is the earlier one's difference with its sign
+    flipped: the flipped interval's ends swap too. Fieller's interval holds its own ratio (the
+    paired t statistic of ``a − r̂ b`` is 0 there), so ``low ≤ value ≤ high`` on every row."""
+    names = ["hhcf", "hf", "hckf", "mekf", "huber_ckf", "ckf"]
+    for order in (names, names[::-1]):
+        for line in ranking_lines(ranking_metrics(order))[2:]:
+            value, interval = [c.strip() for c in line.strip("|").split("|")][3].split(" % ")
+            low, high = (float(x) for x in interval.strip("[]").split(","))
+            assert low <= float(value) <= high, line
+
+
 # --- coverage of every Student-t interval labelled 95 % ---
 
 SAMPLES, N, MU = 4000, 3, 2.5

@@ -96,6 +96,24 @@ def test_an_output_folder_that_cannot_be_made_is_refused(capsys, tmp_path):
     assert "hydra.sweep.dir=" in line and "is not a folder" in line
 
 
+def test_an_output_folder_that_cannot_be_written_is_refused(capsys, tmp_path, monkeypatch):
+    """A folder the user may not write into (mode 555 for anyone but root, a read-only mount) is
+    refused with one line; the permission is simulated for that one folder, since root (CI
+    containers) may write anywhere."""
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real_access = os.access
+
+    def access(path, mode, **kw) -> bool:  # that folder's write bit denied, nothing else
+        return not (Path(path) == locked and mode & os.W_OK) and real_access(path, mode, **kw)
+
+    monkeypatch.setattr(os, "access", access)
+    for args, key in ((["runs=2", "duration=0.5", f"hydra.run.dir={locked / 'out'}"], "hydra.run.dir="),
+                      (["-m", "runs=2,3", f"hydra.sweep.dir={locked}"], "hydra.sweep.dir=")):  # fmt: skip
+        line = refused(capsys, args)
+        assert key in line and f"{locked} is not writable" in line
+
+
 def test_a_job_larger_than_the_machine_is_refused_naming_the_keys(capsys, monkeypatch):
     monkeypatch.setattr(sizing, "available_memory", lambda: 2**30)
     line = refused(capsys, ["runs=1000", "duration=100"])
@@ -110,6 +128,16 @@ def test_a_job_near_the_machines_memory_is_warned_about(capsys, monkeypatch):
     monkeypatch.setattr(sizing, "available_memory", lambda: int(need / (0.5 * (1 + sizing.WARN_FRACTION))))
     assert sizing.check_size(50, 20.0, 0.01, 6, 3, 2, 3) == need
     assert "quadest: warning: the job needs about" in capsys.readouterr().err
+
+
+def test_a_job_one_byte_above_the_machines_memory_is_refused(monkeypatch):
+    """The refusal's edge is the available memory itself: one byte short refuses, enough warns."""
+    need = sizing.job_bytes(50, 2001, 6, 3, 2, 3)
+    monkeypatch.setattr(sizing, "available_memory", lambda: need - 1)
+    with pytest.raises(ConfigError, match=r"^runs=50 is invalid: the job needs about"):
+        sizing.check_size(50, 20.0, 0.01, 6, 3, 2, 3)
+    monkeypatch.setattr(sizing, "available_memory", lambda: need)
+    assert sizing.check_size(50, 20.0, 0.01, 6, 3, 2, 3) == need
 
 
 def test_the_size_estimate_counts_every_array_it_names():
@@ -158,6 +186,16 @@ def test_a_truncated_log_replays_with_a_warning(capsys, tmp_path):
     validate(compose_config(["experiment=px4_replay", f"source.path={path}"]))
     err = capsys.readouterr().err
     assert f"quadest: warning: {path} ends in" in err and "truncated" in err
+
+
+def test_a_log_shorter_than_the_duration_is_named(capsys):
+    """The shipped log holds 68.874 s of IMU and attitude data (``source.warmup``'s refusal says so):
+    asking for 100 s replays it to its end, with a warning naming the log and both lengths."""
+    validate(compose_config(["experiment=px4_replay", "duration=100"]))
+    err = capsys.readouterr().err
+    assert f"quadest: warning: {shipped_log()} holds 68.874 s after source.start=0, less than duration=100" in err
+    validate(compose_config(["experiment=px4_replay", "duration=60"]))
+    assert "less than duration" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("n", range(2, 16))

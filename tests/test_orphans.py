@@ -116,3 +116,30 @@ def test_a_launchers_worker_dies_with_the_sweeps_main_process(tmp_path, how):
             os.killpg(main.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+def test_killing_a_joblib_sweep_kills_its_launchers_workers(tmp_path):
+    """The real launcher path: ``quadest -m hydra/launcher=quadest_joblib`` killed while both of
+    its cells run leaves no loky worker behind (each cell's job calls ``watch_parent`` first)."""
+    sweep = tmp_path / "sweep"
+    env = {**os.environ, "QUADEST_CACHE_DIR": str(tmp_path / "cache")}
+    args = [QUADEST, "-m", "hydra/launcher=quadest_joblib", "model=linear", "estimator=[ekf]", "runs=200",
+            "duration=120,121", "progress=false", "cache.enabled=false", "output.figures=false",
+            f"hydra.sweep.dir={sweep}"]  # fmt: skip
+    job = subprocess.Popen(args, env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        # both cells started: Hydra writes a cell's .hydra folder just before it calls the job
+        def started() -> bool:
+            workers = [pid for pid in _group(job.pid) if "popen_loky_posix" in _cmdline(pid)]
+            return len(workers) == 2 and all((sweep / cell / ".hydra" / "overrides.yaml").is_file() for cell in "01")
+
+        assert _wait(started, 300), f"the sweep's cells did not start: {job.stderr.read().decode()[-2000:]}"
+        time.sleep(2.0)  # past the job's first statement (watch_parent)
+        job.send_signal(signal.SIGKILL)
+        job.wait()
+        assert _wait(lambda: not _group(job.pid), 10), f"processes left: {_group(job.pid)}"
+    finally:
+        try:
+            os.killpg(job.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass

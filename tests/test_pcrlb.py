@@ -1,7 +1,8 @@
 """The posterior Cramér–Rao recursion (quadest.evaluation.pcrlb) against closed forms: the Kalman
 filter's Riccati recursion with a singular Q, Tichavský's information form where Q is invertible,
 and the properties any bound has (monotone in P0, no negative variance, no information from a step
-without a measurement, the measurement at step k read with the input of step k)."""
+without a measurement, the measurement at step k read with the input of step k, the transition
+into step k with the input of step k − 1)."""
 
 from __future__ import annotations
 
@@ -22,11 +23,13 @@ EPS = np.finfo(float).eps
 
 def riccati(A, Q, P0, H_of_step, R) -> np.ndarray:
     """diag P_k of the Kalman filter's covariance (standard form, not the Joseph form the bound
-    uses): ``P⁻ = A P Aᵀ + Q``, ``K = P⁻Hᵀ(H P⁻ Hᵀ + R)⁻¹``, ``P = (I − K H) P⁻``."""
+    uses): ``P⁻ = A P Aᵀ + Q``, ``K = P⁻Hᵀ(H P⁻ Hᵀ + R)⁻¹``, ``P = (I − K H) P⁻``; ``A`` is one matrix,
+    or a list whose ``A[k − 1]`` leads into step k."""
     steps = len(H_of_step)
     P, out = P0.copy(), [np.diag(P0)]
     for k in range(1, steps):
-        P = A @ P @ A.T + Q
+        A_k = A[k - 1] if isinstance(A, list) else A  # a list: the transition from step k - 1
+        P = A_k @ P @ A_k.T + Q
         H = H_of_step[k]
         K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
         P = (np.eye(len(P)) - K @ H) @ P
@@ -115,6 +118,31 @@ def test_the_measurement_at_step_k_is_read_with_the_input_of_step_k():
     d = input_measured_data(GAINS)
     m = d.model
     expected = riccati(m.A, m.Q, d.P0, [np.array([[u, 0.0]]) for u in GAINS], m.R)
+    assert np.abs(pcrlb_variances(d) - expected).max() / expected.max() <= 1e-9
+
+
+class InputDriven(InputMeasured):
+    """The same double integrator with the velocity entering the position through the input,
+    ``x_k = x_{k−1} + u_{k−1} T v_{k−1}`` (F changes from step to step), and the position measured
+    at every step with gain 1."""
+
+    def F_err(self, x, u):
+        F = np.array(np.broadcast_to(self.A, (x.shape[0], 2, 2)))
+        F[:, 0, 1] *= u[:, 0]
+        return F
+
+    def H_err(self, x, u, sensor=None):
+        return np.broadcast_to(np.array([[1.0, 0.0]]), (x.shape[0], 1, 2))
+
+
+def test_the_transition_into_step_k_is_read_with_the_input_of_step_k_minus_1():
+    """``F_{k−1} = [[1, u_{k−1} T], [0, 1]]``: the bound equals the Riccati recursion with each
+    transition at the input of the step it leaves (as the filters predict from k − 1 to k);
+    a transition read at another step's input would not."""
+    d = input_measured_data(GAINS)
+    d.model = m = InputDriven(T=0.1, q=0.5, r=0.04)
+    transitions = [np.array([[1.0, u * 0.1], [0.0, 1.0]]) for u in GAINS]
+    expected = riccati(transitions, m.Q, d.P0, [np.array([[1.0, 0.0]])] * GAINS.size, m.R)
     assert np.abs(pcrlb_variances(d) - expected).max() / expected.max() <= 1e-9
 
 

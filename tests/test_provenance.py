@@ -107,7 +107,21 @@ def test_a_non_editable_install_reports_its_build_record_and_says_so(repo, tmp_p
 def test_a_checkout_is_described_by_git_at_run_time(repo):
     got = _provenance_of(repo / "src")
     assert got["commit"] == _git(repo, "rev-parse", "HEAD") and got["commit_source"] == "git"
-    assert "provenance_note" not in got
+    assert "provenance_note" not in got and got["commit_dirty"] is False
+
+
+@pytest.mark.parametrize(("edited", "dirty"), [("src/quadest/errors.py", True), ("README.md", False)])
+def test_a_checkout_with_edited_code_says_so_at_run_time(repo, edited, dirty):
+    """An edit to the package's source makes the run's commit dirty; an edit outside the code the
+    record covers (``src/``, ``conf/``, ``experiments/``) does not."""
+    source = repo / edited
+    original = source.read_text()
+    try:
+        source.write_text(original + "\n# an edit\n")
+        got = _provenance_of(repo / "src")
+    finally:
+        source.write_text(original)
+    assert got["commit"] == _git(repo, "rev-parse", "HEAD") and got["commit_dirty"] is dirty
 
 
 def _regenerate_results():

@@ -213,6 +213,13 @@ MUTATIONS = (
         (VALIDATION + "test_pcrlb_is_called_a_bound_only_where_it_is_one",),
     ),
     Mutation(
+        "PCRLB transition read with the first step's input at every step",
+        "src/quadest/evaluation/pcrlb.py",
+        "        u_prev = u_now\n",
+        "",
+        (PCRLB + "test_the_transition_into_step_k_is_read_with_the_input_of_step_k_minus_1",),
+    ),
+    Mutation(
         "PCRLB measurement information read with the previous step's input",
         "src/quadest/evaluation/pcrlb.py",
         "H = model.H_err(data.truth[:, k], u_now, sensor)",
@@ -871,6 +878,27 @@ MUTATIONS = (
         (VISIBLE + "test_an_estimator_refusing_its_configuration_fails_the_job_not_its_runs",),
     ),
     Mutation(
+        "an output folder without write permission passes the check",
+        "src/quadest/app/cli.py",
+        "    if not os.access(existing, os.W_OK | os.X_OK):",
+        "    if not os.access(existing, os.F_OK):",
+        (VISIBLE + "test_an_output_folder_that_cannot_be_written_is_refused",),
+    ),
+    Mutation(
+        "a job up to twice the machine's memory passes the size check",
+        "src/quadest/app/sizing.py",
+        "    if need > have:",
+        "    if need > 2 * have:",
+        (VISIBLE + "test_a_job_one_byte_above_the_machines_memory_is_refused",),
+    ),
+    Mutation(
+        "a replayed log shorter than duration replays without a word",
+        "src/quadest/replay/data.py",
+        "    if math.isfinite(settings.duration) and held < settings.duration:",
+        "    if math.isfinite(settings.duration) and held > settings.duration:",
+        (VISIBLE + "test_a_log_shorter_than_the_duration_is_named",),
+    ),
+    Mutation(
         "a sweep with a failed cell exits 0",
         "src/quadest/app/cli.py",
         "        sys.exit(SWEEP_FAILED)",
@@ -906,6 +934,20 @@ MUTATIONS = (
         'mp_context=multiprocessing.get_context("spawn"), **pool_options())',
         'mp_context=multiprocessing.get_context("spawn"))',
         ("tests/test_orphans.py::test_killing_a_job_kills_its_estimator_workers",),
+    ),
+    Mutation(
+        "a sweep's joblib workers outlive a killed sweep",
+        "src/quadest/app/cli.py",
+        "    watch_parent()  # a launcher's worker (joblib) dies with the sweep's main process",
+        "    pass",
+        ("tests/test_orphans.py::test_killing_a_joblib_sweep_kills_its_launchers_workers",),
+    ),
+    Mutation(
+        "a checkout's run-time dirty flag ignores edits to src/",
+        "src/quadest/app/provenance.py",
+        '"--", ":/src", ":/conf", ":/experiments")',
+        '"--", ":/conf", ":/experiments")',
+        ("tests/test_provenance.py::test_a_checkout_with_edited_code_says_so_at_run_time",),
     ),
     Mutation(
         "an install inside a clone reports the clone's commit",
@@ -1185,6 +1227,13 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "fieller_interval(numerator[:, None], denominator[:, None]",
         "fieller_interval(numerator[:, None], denominator[::-1, None]",
         (B_STATISTICS + "test_the_particle_count_intervals_pair_each_runs_numerator_and_denominator",),
+    ),
+    Mutation(
+        "a ranking row's flipped interval keeps its ends unswapped",
+        "src/quadest/aggregate/ranking.py",
+        "            lo, hi = min(lo, hi), max(lo, hi)\n",
+        "",
+        (B_STATISTICS + "test_a_ranking_rows_interval_is_ordered_and_holds_its_value_in_either_order",),
     ),
     Mutation(
         'a ranking step signed by the reference instead of the estimator',
