@@ -114,6 +114,14 @@ def test_an_output_folder_that_cannot_be_written_is_refused(capsys, tmp_path, mo
         assert key in line and f"{locked} is not writable" in line
 
 
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_a_folder_whose_file_system_takes_no_new_folder_is_refused(capsys):
+    """Root's permissions allow writing into /proc, which takes no new folder: refused with one
+    line naming the key before any work, not a traceback when Hydra creates the folder."""
+    line = refused(capsys, ["runs=2", "duration=0.5", "hydra.run.dir=/proc/quadest_out"])
+    assert "hydra.run.dir=" in line and "/proc takes no new folder" in line
+
+
 def test_a_job_larger_than_the_machine_is_refused_naming_the_keys(capsys, monkeypatch):
     monkeypatch.setattr(sizing, "available_memory", lambda: 2**30)
     line = refused(capsys, ["runs=1000", "duration=100"])

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from quadest.evaluation.paired import holm, paired_comparison, summary_lines
+from quadest.evaluation.paired import holm, paired_comparison, paired_markdown, summary_lines
 
 STATES = ("vx", "phi")
 
@@ -186,3 +186,15 @@ def test_fewer_than_two_runs_are_not_tested():
 def test_single_estimator_gives_an_empty_table():
     table = paired_comparison(metrics({"a": np.ones((5, 2))}))
     assert table.empty and summary_lines(table) == []
+
+
+def test_an_unbounded_fieller_interval_prints_as_unbounded():
+    """Three runs whose reference RMSE scatters around a small mean (its mean not significantly
+    above 0 at t₀.₉₇₅,₂ = 4.3): Fieller's set has no ends, the CSV leaves them empty (NaN) and the
+    printed line and the Markdown say "unbounded" rather than "[+nan, +nan]"."""
+    ref = np.array([[0.1, 1.0], [2.0, 1.1], [0.2, 0.9]])
+    table = paired_comparison(metrics({"ref": ref, "est": ref * np.array([[1.5, 1.2], [0.9, 1.1], [1.6, 1.3]])}))
+    r = rows(table, "est - ref")
+    assert np.isnan(r.loc["vx", "rel_ci_low"]) and np.isnan(r.loc["vx", "rel_ci_high"])
+    assert np.isfinite(r.loc["phi", "rel_ci_low"])
+    assert "[unbounded]" in paired_markdown(table) and "nan" not in paired_markdown(table).lower()

@@ -77,6 +77,20 @@ FAST_PF = "tests/test_particle_fast_mode.py::"
 
 MUTATIONS = (
     Mutation(
+        "the output folder's probe made in the temporary folder instead",
+        "src/quadest/app/cli.py",
+        'os.rmdir(tempfile.mkdtemp(prefix=".quadest-probe-", dir=existing))',
+        'os.rmdir(tempfile.mkdtemp(prefix=".quadest-probe-", dir=tempfile.gettempdir()))',
+        (VISIBLE + "test_a_folder_whose_file_system_takes_no_new_folder_is_refused",),
+    ),
+    Mutation(
+        "an unbounded Fieller interval printed as nan",
+        "src/quadest/evaluation/paired.py",
+        "    if np.isnan(low) or np.isnan(high):\n",
+        "    if False:\n",
+        ("tests/test_paired.py::test_an_unbounded_fieller_interval_prints_as_unbounded",),
+    ),
+    Mutation(
         "an estimator that could not run prints as a plain divergence",
         "src/quadest/app/cli.py",
         'return f" (every run: {reasons[first][:160]})"',

@@ -19,6 +19,7 @@ import math
 import os
 import re
 import sys
+import tempfile
 from pathlib import Path
 
 import hydra
@@ -246,6 +247,12 @@ def check_output_dir(key: str, cfg: DictConfig) -> None:
         raise ConfigError(key, str(path), f"{existing} is not a folder; choose an output folder that can be created")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise ConfigError(key, str(path), f"{existing} is not writable; choose a folder you can write into")
+    try:  # permissions can say yes where the file system says no (root on /proc, a read-only mount)
+        os.rmdir(tempfile.mkdtemp(prefix=".quadest-probe-", dir=existing))
+    except OSError as exc:
+        raise ConfigError(
+            key, str(path), f"{existing} takes no new folder ({exc.strerror}); choose a folder you can write into"
+        ) from None
 
 
 def _cells(overrides: list[str]) -> list[list[str]]:

@@ -160,6 +160,14 @@ def paired_comparison(metrics: pd.DataFrame) -> pd.DataFrame:
     return out[list(COLUMNS)]
 
 
+def percent_interval(low: float, high: float) -> str:
+    """``[low, high]`` of a fraction in percent; ``[unbounded]`` where Fieller's set has no ends
+    (the reference's mean RMSE not significantly above 0 at the runs used)."""
+    if np.isnan(low) or np.isnan(high):
+        return "[unbounded]"
+    return f"[{100 * low:+.3g}, {100 * high:+.3g}]"
+
+
 def summary_lines(table: pd.DataFrame) -> list[str]:
     """One line per pair: how many states differ at Holm-adjusted Wilcoxon p < 0.05, and the
     state with the smallest adjusted p (ties: the largest relative difference), as
@@ -178,9 +186,9 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
         best = tested.assign(size=-tested["rel_diff"].abs()).sort_values(["p_wilcoxon_holm", "size"]).iloc[0]
         lines.append(
             f"{pair}: {significant} of {len(rows)} states differ (Wilcoxon, Holm p < {SIGNIFICANCE:g}); "
-            f"{best['state']} {100 * best['rel_diff']:+.3g} % [{100 * best['rel_ci_low']:+.3g}, "
-            f"{100 * best['rel_ci_high']:+.3g}], p_holm {best['p_wilcoxon_holm']:.2g}; {used}"
-            + _unreachable(runs, family)
+            f"{best['state']} {100 * best['rel_diff']:+.3g} % "
+            f"{percent_interval(best['rel_ci_low'], best['rel_ci_high'])}, "
+            f"p_holm {best['p_wilcoxon_holm']:.2g}; {used}" + _unreachable(runs, family)
         )
     return lines
 
@@ -223,7 +231,7 @@ def paired_markdown(table: pd.DataFrame) -> str:
             "runs": table["runs"],
             "mean diff": table["mean_diff"].map(lambda v: f"{v:+.3g}"),
             "diff % [95% CI]": [
-                f"{100 * r:+.3g} [{100 * lo:+.3g}, {100 * hi:+.3g}]"
+                f"{100 * r:+.3g} {percent_interval(lo, hi)}"
                 for r, lo, hi in zip(table["rel_diff"], table["rel_ci_low"], table["rel_ci_high"], strict=True)
             ],
             "p Wilcoxon (Holm)": table["p_wilcoxon_holm"].map(lambda v: f"{v:.2g}"),
