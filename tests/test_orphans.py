@@ -47,6 +47,21 @@ def _wait(condition, timeout: float) -> bool:
     return condition()
 
 
+def _kill_main_and_expect_nothing_left(job: subprocess.Popen) -> None:
+    """SIGKILL the job's main process; within 10 s no process of its group may be left."""
+    job.send_signal(signal.SIGKILL)
+    job.wait()
+    assert _wait(lambda: not _group(job.pid), 10), f"processes left: {_group(job.pid)}"
+
+
+def _kill_group(job: subprocess.Popen) -> None:
+    """Whatever the test's outcome, leave no process of the job's group behind."""
+    try:
+        os.killpg(job.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
 def test_killing_a_job_kills_its_estimator_workers(tmp_path):
     env = {**os.environ, "QUADEST_CACHE_DIR": str(tmp_path / "cache")}
     args = [QUADEST, "estimator=[ekf,ukf]", "workers=2", "runs=10", "duration=60", "progress=false",
@@ -60,14 +75,9 @@ def test_killing_a_job_kills_its_estimator_workers(tmp_path):
             return len(workers) == 2 and all(s[3] >= 3 * tick for s in workers)
 
         assert _wait(working, 300), f"the job's workers did not start: {job.stderr.read().decode()[-2000:]}"
-        job.send_signal(signal.SIGKILL)
-        job.wait()
-        assert _wait(lambda: not _group(job.pid), 10), f"processes left: {_group(job.pid)}"
+        _kill_main_and_expect_nothing_left(job)
     finally:
-        try:
-            os.killpg(job.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+        _kill_group(job)
 
 
 def _cmdline(pid: int) -> str:
@@ -135,11 +145,6 @@ def test_killing_a_joblib_sweep_kills_its_launchers_workers(tmp_path):
 
         assert _wait(started, 300), f"the sweep's cells did not start: {job.stderr.read().decode()[-2000:]}"
         time.sleep(2.0)  # past the job's first statement (watch_parent)
-        job.send_signal(signal.SIGKILL)
-        job.wait()
-        assert _wait(lambda: not _group(job.pid), 10), f"processes left: {_group(job.pid)}"
+        _kill_main_and_expect_nothing_left(job)
     finally:
-        try:
-            os.killpg(job.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+        _kill_group(job)
