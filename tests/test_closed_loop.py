@@ -307,6 +307,7 @@ def test_a_perfect_estimate_hands_the_controller_the_truth(formulation):
 
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
 @pytest.mark.parametrize("loop", ["truth", "measured", "estimate"])
+@pytest.mark.integration
 def test_every_loop_flies_every_quadrotor_formulation(tmp_path, formulation, loop):
     cfg = _cfg(f"loop={loop}", f"model.formulation={formulation}", "duration=0.5", "scenario=attitude_steps",
                "estimator=[ekf]", "workers=1", "output.figures=false", "output.saved_runs=1")  # fmt: skip
@@ -329,6 +330,7 @@ def test_every_loop_flies_every_quadrotor_formulation(tmp_path, formulation, loo
         (["loop=truth", "closed_loop.settling_band=1.5"], "closed_loop.settling_band", "(0, 1)"),
     ],
 )
+@pytest.mark.integration
 def test_bad_loop_settings_fail_in_one_line_before_any_work(tmp_path, overrides, key, allowed):
     cfg = _cfg(*overrides)
     settings = data_settings(cfg)
@@ -340,6 +342,7 @@ def test_bad_loop_settings_fail_in_one_line_before_any_work(tmp_path, overrides,
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.integration
 def test_the_sweep_report_puts_the_loop_modes_side_by_side(tmp_path):
     for job, loop in enumerate(("measured", "estimate")):
         cfg = _cfg(f"loop={loop}", "duration=0.5", "scenario=attitude_steps", "scenario.steps=[[0.2,0.0,4.0]]",
