@@ -78,6 +78,7 @@ def test_the_open_loop_data_are_the_pre_change_ones():
 
 
 @pytest.mark.parametrize("scenario", ["figure8", "attitude_steps"])
+@pytest.mark.slow
 def test_truth_loop_reproduces_the_open_loop_truth(scenario):
     """Close to the stored pre-change truth (see ROUND_OFF), exact at the seed-drawn start; and
     bit for bit the open loop's truth and data flown today."""
@@ -136,6 +137,7 @@ class Spy(Estimator):
         return self.inner.innovation()
 
 
+@pytest.mark.slow
 def test_every_estimator_sees_the_same_draws_and_one_filter_flies_one_truth():
     # Encoders without quantisation: with 256 lines a round-off difference between two filters
     # flips an encoder count now and then, and the loop amplifies it (docs/closed-loop.md).

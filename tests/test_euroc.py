@@ -90,6 +90,7 @@ def _final_position_error(folder, period: float) -> float:
     return float(np.linalg.norm(x[0, 4:7] - data.truth[0, -1, 4:7]))
 
 
+@pytest.mark.slow
 def test_the_ins_flies_the_reference_with_the_readers_imu(tmp_path):
     """The frames agree (z up, gravity along −z, quaternions scalar first body → world, biases as
     measured − true): the strapdown error of the reader's IMU against the reader's reference is the
@@ -142,6 +143,7 @@ def _drop_column(header: str, name: str) -> str:
     [("no folder", "no_such"), ("no reference file", "state_groundtruth_estimate0/data.csv is missing"),
      ("no a_RS_S_y column", "a_RS_S_y"), ("no q_RS_w column", "q_RS_w")],
 )  # fmt: skip
+@pytest.mark.slow
 def test_a_bad_folder_is_refused_in_one_line_naming_the_key(tmp_path, breakage, said):
     s = stamps(PERIOD_NS, 5)
     imu_header = _drop_column(IMU_HEADER, "a_RS_S_y") if "a_RS_S_y" in breakage else IMU_HEADER

@@ -87,6 +87,7 @@ def test_the_ekf_is_the_linear_kalman_filter_with_phi_i_plus_f_ts_and_h_identity
         np.testing.assert_allclose(est.covariance, P, rtol=1e-7, atol=1e-7 * np.abs(P).max())
 
 
+@pytest.mark.slow
 def test_the_analytic_jacobian_is_the_derivative_of_the_continuous_dynamics():
     cfg = _cfg("loop=open")
     data = build_data(data_settings(cfg))
@@ -136,6 +137,7 @@ def test_every_command_in_flight_is_the_controllers_on_the_truth_with_the_estima
         np.testing.assert_array_equal(flight.truth.command[:, k], loop.controller.command(fed, loop.references[k]))
 
 
+@pytest.mark.slow
 def test_the_arms_share_their_draws_and_the_ekf_sees_what_the_noisy_controller_read():
     cfg = _cfg("duration=1.0")
     loop = Seed003Loop.from_settings(data_settings(cfg))
