@@ -310,6 +310,7 @@ def test_a_perfect_estimate_hands_the_controller_the_truth(formulation):
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
 @pytest.mark.parametrize("loop", ["truth", "measured", "estimate"])
 @pytest.mark.integration
+@pytest.mark.slow
 def test_every_loop_flies_every_quadrotor_formulation(tmp_path, formulation, loop):
     cfg = _cfg(f"loop={loop}", f"model.formulation={formulation}", "duration=0.5", "scenario=attitude_steps",
                "estimator=[ekf]", "workers=1", "output.figures=false", "output.saved_runs=1")  # fmt: skip
@@ -345,6 +346,7 @@ def test_bad_loop_settings_fail_in_one_line_before_any_work(tmp_path, overrides,
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_the_sweep_report_puts_the_loop_modes_side_by_side(tmp_path):
     for job, loop in enumerate(("measured", "estimate")):
         cfg = _cfg(f"loop={loop}", "duration=0.5", "scenario=attitude_steps", "scenario.steps=[[0.2,0.0,4.0]]",

@@ -172,6 +172,7 @@ def _quadest(args, cwd):
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_quadest_refuses_a_folder_without_the_imu_file_with_exit_2(tmp_path):
     (tmp_path / "empty" / "mav0").mkdir(parents=True)
     proc = _quadest(["model=ins", f"model.recording={tmp_path / 'empty'}", f"hydra.run.dir={tmp_path / 'o'}"], tmp_path)
@@ -186,6 +187,7 @@ def test_quadest_refuses_a_folder_without_the_imu_file_with_exit_2(tmp_path):
     [("ins", ["model.aiding=[gps]"], slice(4, 7), slice(0, 3)), ("attitude", [], slice(0, 4), slice(3, 7))],
 )
 @pytest.mark.integration
+@pytest.mark.slow
 def test_quadest_runs_on_a_euroc_folder(tmp_path, model, extra, truth_columns, written_columns):
     """The whole job, with the written reference as the truth of ``timeseries.npz`` (position for
     the INS, the quaternion for the attitude filter) and finite errors for every state."""

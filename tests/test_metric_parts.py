@@ -215,6 +215,7 @@ JOBS = {
 
 @pytest.mark.parametrize("kind", JOBS)
 @pytest.mark.integration
+@pytest.mark.slow
 def test_every_job_kind_writes_the_documented_columns(kind, tmp_path):
     cfg = compose_config([*JOBS[kind], "workers=1", "progress=false", "output.figures=false", "cache.enabled=false"])
     run_job(cfg, tmp_path)

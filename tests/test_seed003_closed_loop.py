@@ -222,6 +222,7 @@ def test_the_job_builds_the_seed003_loop_for_its_model():
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_the_report_pairs_the_arms_runs_for_control_and_estimation_metrics(tmp_path):
     for job, loop in enumerate(("measured", "estimate")):
         cfg = _cfg(f"loop={loop}", "runs=3", "duration=2.5", "scenario.steps=[[0.2,0.0,4.0]]", "output.saved_runs=1")

@@ -249,6 +249,7 @@ def test_dd1_keeps_first_order_terms_only_and_cdkf_the_second_order_too():
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_linear_command_every_family_filter_matches_the_kalman_filter(tmp_path):
     """The family's acceptance command, ``quadest model=linear sample_period=0.1 duration=30
     estimator=[ukf,srukf,cdkf,srcdkf,ckf,srckf,ckf5,srckf5,ghkf]`` (3 runs here), through the job:
