@@ -5,8 +5,8 @@ Module- and session-scoped fixtures share one temporary cache.
 
 Every test belongs to one layer (docs/testing.md, "Layers"): ``unit``, ``integration`` or
 ``hygiene``, the marker its file's row of ``LAYERS`` gives it unless the test carries one of the
-three itself. ``slow`` (more than about 5 s on the 2-core development machine) is marked on the test,
-whatever its layer."""
+three itself. ``slow`` (more than about a second alone on the idle 2-core development machine) is
+marked on the test, whatever its layer."""
 
 from __future__ import annotations
 
