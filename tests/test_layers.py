@@ -23,3 +23,14 @@ def test_every_row_names_a_test_file_and_a_layer():
     assert not stale, f"LAYERS in tests/conftest.py names {', '.join(stale)}, which tests/ does not hold"
     unknown = {name: layer for name, layer in LAYERS.items() if layer not in LAYER_MARKERS}
     assert not unknown, f"LAYERS in tests/conftest.py: {unknown} is not one of {', '.join(LAYER_MARKERS)}"
+
+
+def test_every_collected_test_carries_one_layer(request):
+    """Of the tests this run collected (all of them in a full run), each carries exactly one layer
+    marker: its file's from ``LAYERS`` or its own."""
+    wrong = {
+        item.nodeid: layers
+        for item in request.session.items
+        if len(layers := {mark.name for mark in item.iter_markers() if mark.name in LAYER_MARKERS}) != 1
+    }
+    assert not wrong, f"tests without exactly one layer: {dict(list(wrong.items())[:5])}"
