@@ -54,6 +54,7 @@ def test_the_anchors_are_registered_estimators_meeting_the_contract():
 
 @pytest.mark.parametrize("name", sorted(ANCHORS))
 @pytest.mark.parametrize(("gravity_z", "field"), [(9.81, FIELD_NED), (-9.81, FIELD_NED * [1, 1, -1])])
+@pytest.mark.slow
 def test_each_anchor_converges_to_the_true_attitude_at_rest(name, gravity_z, field):
     """NED (gravity +z, as in a PX4 log) and z up (the simulation): from 5° off, every anchor must
     settle on roll 10°, pitch −20°, yaw 60°. A missing accelerometer flip for NED (a 180° tilt
@@ -74,6 +75,7 @@ def test_each_anchor_converges_to_the_true_attitude_at_rest(name, gravity_z, fie
     assert angle_error < 0.5, (name, angle_error)
 
 
+@pytest.mark.slow
 def test_mahony_estimates_the_gyro_bias_and_reports_it():
     model = _model(9.81, FIELD_NED)
     bias = np.array([0.01, -0.02, 0.015])

@@ -153,6 +153,7 @@ def rest_and_manoeuvre():
     return out
 
 
+@pytest.mark.slow
 def test_static_vehicle_converges_to_attitude_and_gyro_bias(rest_and_manoeuvre):
     """At rest the attitude drift fixes the gyro bias: σ below 1e-3 rad/s (prior 0.01) and the
     error within 4σ (a 4σ excursion of one of 8 runs × 3 components has probability < 2e-3). The
@@ -175,6 +176,7 @@ def test_static_vehicle_converges_to_attitude_and_gyro_bias(rest_and_manoeuvre):
     assert np.all(np.sqrt(variances[:, 2]) < 0.2 / (9.81 * sin_gm))
 
 
+@pytest.mark.slow
 def test_horizontal_accelerometer_bias_is_unobservable_at_rest_and_observable_in_a_manoeuvre(rest_and_manoeuvre):
     """With gravity as the only reference, a horizontal accelerometer bias and a tilt give the same
     reading at rest (b_a,xy ≈ g δθ): the bias variance in the plane orthogonal to gravity must stay
@@ -221,6 +223,7 @@ def _horizontal_bias_variance(P: np.ndarray, x_true: np.ndarray) -> np.ndarray:
 # --- consistency on the figure eight ---
 
 
+@pytest.mark.slow
 def test_error_state_nees_lies_in_its_chi2_band_on_the_figure_eight():
     """20 runs of 10 s of the figure eight on the shared quadrotor (consumer MIMU, magnetometer at
     50 Hz). NEES on the 9-dimensional error state: 20 × the run-average is χ²(180) when the
@@ -321,6 +324,7 @@ def test_magnetometer_samples_the_body_field_at_its_rate():
         ("model.magnetometer.bias=-1", "model.magnetometer.bias"),
     ],
 )
+@pytest.mark.slow
 def test_both_models_refuse_a_bad_magnetometer_naming_the_key(model, override, key):
     """One magnetometer (:class:`quadest.sensors.magnetometer.Magnetometer`) for ``model=attitude``
     and ``model=ins``: the same settings are refused by both before any work, with one line."""

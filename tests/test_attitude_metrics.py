@@ -137,6 +137,8 @@ def test_convergence_table_reads_the_ensemble_curve_of_each_bias_state():
     assert row["final_rms"] == pytest.approx(np.sqrt(np.mean(rms[-30:] ** 2)), rel=1e-12)
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_attitude_job_reports_degrees_convergence_figures_and_nine_dof(tmp_path):
     """A tiny model=attitude job: the printed NEES has 9 dof (the error state), not 10 (the
     quaternion state); metrics.csv and the paired comparison carry the derived rows in degrees;
@@ -188,6 +190,8 @@ def test_the_settled_attitude_table_leaves_out_the_transient_and_diverged_runs(t
         np.testing.assert_allclose(table.loc[name, ["roll_deg", "pitch_deg"]], 0.0, atol=1e-9)
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_a_model_without_a_primary_measurement_prints_nis_per_sensor(tmp_path):
     """model=ins updates only through its sensors: the printed line gives each sensor's NIS and
     no meaningless "0 dof" NIS of the empty primary measurement."""

@@ -27,6 +27,7 @@ from quadest.simulation.registry import build_data
 Z = 4.5
 
 
+@pytest.mark.slow
 def test_the_gps_r_adds_the_drifts_variance_to_the_white_noises():
     settings = compose_settings(["model=ins", "model.aiding=[gps]", "runs=2", "duration=1.0", "progress=false",
                                  "sensor.gps.position_drift=0.7", "sensor.gps.horizontal_noise=0.4",

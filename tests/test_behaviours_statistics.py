@@ -23,6 +23,7 @@ import re
 
 import numpy as np
 import pandas as pd
+import pytest
 from statsmodels.stats.multitest import multipletests
 
 from quadest.aggregate.particle_count import diff_interval, particle_count_series, ratio_interval
@@ -102,6 +103,7 @@ def assert_covers(low: np.ndarray, high: np.ndarray, truth: float, level: float 
     assert abs(coverage - level) <= Z * np.sqrt(level * (1 - level) / low.size), (coverage, low.size)
 
 
+@pytest.mark.slow
 def test_the_paired_comparisons_relative_ci_pairs_each_runs_numerator_and_denominator():
     """The relative difference's 95 % interval covers the true ratio 0.05 at 5 runs."""
     est, ref = paired_ratio_samples(21)
@@ -225,6 +227,7 @@ def test_the_closed_loop_control_tables_95_percent_intervals_cover_95_percent():
         assert_covers_95(part["ci_low"].to_numpy(), part["ci_high"].to_numpy(), truth)
 
 
+@pytest.mark.slow
 def test_the_paired_and_step_time_95_percent_intervals_cover_95_percent():
     """``paired_interval`` on 4000 samples; the step-time ratios on 300 jobs' worth of three
     independent pairs (900 samples, ±0.033)."""
@@ -248,6 +251,7 @@ def test_the_paired_and_step_time_95_percent_intervals_cover_95_percent():
     assert_covers_95(np.array(low), np.array(high), np.exp(0.3))
 
 
+@pytest.mark.slow
 def test_the_paired_comparisons_95_percent_intervals_cover_95_percent_at_few_runs():
     """The paired comparison's intervals of a mean difference, on normal differences of n = 5
     runs (the default comparison's count) and n = 30, 2000 samples each (one per state of one

@@ -55,6 +55,7 @@ def test_the_scripts_are_found():
 
 
 @pytest.mark.parametrize("script", [s for s in scripts() if s not in SEPARATE])
+@pytest.mark.slow
 def test_quick_mode_runs(script):
     done = run_quick(script)
     assert done.returncode == 0, f"{script} --quick failed:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"

@@ -83,6 +83,7 @@ def without_timing(summary: dict) -> dict:
     return out
 
 
+@pytest.mark.slow
 def test_a_job_served_from_the_cache_writes_what_a_computed_job_writes(tmp_path, spies):
     """Cold (computed and stored), warm (everything looked up) and uncached jobs: the same
     metrics, tables, time series and summary bit for bit; the warm job reports the step times the
@@ -142,11 +143,13 @@ NOT_DATA = [
 
 
 @pytest.mark.parametrize("change", DATA_CHANGES)
+@pytest.mark.slow
 def test_every_setting_of_the_data_changes_the_data_key(tmp_path, change):
     assert data_key(small_cfg(tmp_path, [change])) != data_key(small_cfg(tmp_path))
 
 
 @pytest.mark.parametrize("change", NOT_DATA)
+@pytest.mark.slow
 def test_settings_that_leave_the_data_alone_keep_the_data_key(tmp_path, change):
     assert data_key(small_cfg(tmp_path, [change])) == data_key(small_cfg(tmp_path / "elsewhere"))
 
@@ -183,6 +186,7 @@ def test_the_source_digest_follows_every_file_and_nothing_else(tmp_path):
     assert keys.code_version() == keys.code_version() and len(keys.code_version()) == 64
 
 
+@pytest.mark.slow
 def test_changing_srukf_alpha_reuses_the_baselines_and_the_data(tmp_path, spies):
     """A sweep over the SR-UKF's α: after the first cell only the SR-UKF runs, and the truth is
     never simulated again; a cell seen before runs nothing."""
@@ -234,6 +238,7 @@ for _ in range(15):
 """
 
 
+@pytest.mark.slow
 def test_two_processes_writing_the_same_key_leave_a_valid_entry(tmp_path, capsys):
     """Two writers of one 16 MB entry and a reader polling it all the while: every read is a miss
     before the first write and a whole entry afterwards, never a partial file."""
@@ -289,6 +294,7 @@ def framed(payload: bytes) -> bytes:
     ],
     ids=["truncated", "flipped", "foreign", "empty", "unpicklable", "other-key"],
 )
+@pytest.mark.slow
 def test_a_damaged_entry_is_a_miss_and_is_replaced(tmp_path, spies, capsys, damage):
     cache = tmp_path / "cache"
     cfg = small_cfg(cache, ["estimator=[ekf,srukf]"])

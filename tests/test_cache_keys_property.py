@@ -152,6 +152,7 @@ def all_keys(resolved: dict, tmp_path: Path) -> tuple[str, dict[str, str | None]
 
 
 @pytest.mark.parametrize("overrides", OPTIONS, ids=lambda o: " ".join(o) or "defaults")
+@pytest.mark.slow
 def test_every_leaf_of_the_config_changes_the_keys_of_what_it_affects(overrides, tmp_path):
     """Each leaf changed alone, with the expectations of the module docstring."""
     cfg = compose_config(overrides)
@@ -182,6 +183,7 @@ def test_every_leaf_of_the_config_changes_the_keys_of_what_it_affects(overrides,
     assert not problems, "\n".join(problems)
 
 
+@pytest.mark.slow
 def test_the_family_covers_every_group_and_the_job_keys():
     """The property is only as wide as the configs it walks: every group option is composed, and
     together they hold the job keys, every model, sensor, scenario and estimator node."""
@@ -203,6 +205,7 @@ def test_the_family_covers_every_group_and_the_job_keys():
     assert len(set(declared)) == len(declared), "a path is declared twice"
 
 
+@pytest.mark.slow
 def test_editing_any_source_file_changes_the_code_version(tmp_path, monkeypatch):
     """A copy of the installed package: appending a line to any one ``.py`` file, at any depth,
     changes :func:`~quadest.cache.keys.package_version`, and so does adding a module to a

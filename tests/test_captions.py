@@ -38,6 +38,7 @@ def test_a_job_without_a_smoother_says_nothing_of_a_filtering_bound(tmp_path, ki
     assert "PCRLB" in text and "filtering bound" not in text
 
 
+@pytest.mark.slow
 def test_a_replay_with_a_smoother_says_it_has_no_pcrlb(tmp_path):
     overrides = ["experiment=px4_replay_smoothed", "duration=8", "output.figures=false", "progress=false",
                  "workers=1", "cache.enabled=false"]  # fmt: skip

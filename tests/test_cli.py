@@ -28,6 +28,7 @@ def quadest(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_cli_runs_and_writes_documented_outputs(tmp_path):
     out = tmp_path / "run"
     proc = quadest([*SMALL, f"hydra.run.dir={out}"], tmp_path)
@@ -80,6 +81,7 @@ def test_cli_runs_and_writes_documented_outputs(tmp_path):
     assert summary["estimators"]["srukf"]["parameters"]["alpha"] == 0.5
 
 
+@pytest.mark.slow
 def test_cli_works_from_any_directory(tmp_path):
     """The config tree is found by absolute path, not relative to the working directory."""
     elsewhere = tmp_path / "somewhere" / "else"
@@ -114,6 +116,7 @@ BAD_INPUT = [
 
 
 @pytest.mark.parametrize(("override", "key", "allowed"), BAD_INPUT)
+@pytest.mark.slow
 def test_bad_input_gives_one_line_naming_the_key(tmp_path, override, key, allowed):
     proc = quadest([override, f"hydra.run.dir={tmp_path / 'o'}"], tmp_path)
     assert proc.returncode == 2
@@ -134,6 +137,7 @@ GROUPS = {
 @pytest.mark.parametrize(
     ("model", "sensor", "scenario"), list(itertools.product(GROUPS["model"], GROUPS["sensor"], GROUPS["scenario"]))
 )
+@pytest.mark.slow
 def test_every_group_option_composes_and_validates(model, sensor, scenario):
     """Every option's defaults validate on every model, except where the model's dimension rules
     an option out: ``ghkf``'s default grid of 3^n points is refused above the rule's maximum."""
@@ -164,6 +168,7 @@ def small_job(tmp_path: Path, name: str, extra: list[str]) -> pd.DataFrame:
     return pd.read_csv(tmp_path / name / "metrics.csv")
 
 
+@pytest.mark.slow
 def test_same_config_and_seed_give_identical_numbers(tmp_path):
     a = small_job(tmp_path, "a", ["workers=1"])
     b = small_job(tmp_path, "b", ["workers=2", "cache.enabled=false"])  # computed, not a's cached results
@@ -173,6 +178,7 @@ def test_same_config_and_seed_give_identical_numbers(tmp_path):
     assert not np.allclose(a["rmse"], c["rmse"])
 
 
+@pytest.mark.slow
 def test_all_estimators_see_the_same_draws(tmp_path):
     """Common random numbers: identical estimators configured twice give identical metrics."""
     table = small_job(tmp_path, "crn", ["estimator=[srukf]", "+estimator@estimator.twin=srukf"])
@@ -181,6 +187,7 @@ def test_all_estimators_see_the_same_draws(tmp_path):
     np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_failing_estimator_is_recorded_not_fatal(tmp_path):
     """An SR-UKF with an indefinite UT (augmented, α = 1, β = 0, κ = 3 − n, so W0(c) = −2) fails
     in run 0 of this seed; the job finishes, the other runs count, and the table reports the
@@ -211,6 +218,7 @@ def test_failing_estimator_is_recorded_not_fatal(tmp_path):
 
 
 @pytest.mark.parametrize("experiment", sorted(p.stem for p in (Path(config_dir()) / "experiment").glob("*.yaml")))
+@pytest.mark.slow
 def test_every_experiment_composes_and_validates(experiment):
     from quadest.app.validate import validate
 

@@ -78,6 +78,7 @@ def test_the_open_loop_data_are_the_pre_change_ones():
 
 
 @pytest.mark.parametrize("scenario", ["figure8", "attitude_steps"])
+@pytest.mark.slow
 def test_truth_loop_reproduces_the_open_loop_truth(scenario):
     """Close to the stored pre-change truth (see ROUND_OFF), exact at the seed-drawn start; and
     bit for bit the open loop's truth and data flown today."""
@@ -136,6 +137,7 @@ class Spy(Estimator):
         return self.inner.innovation()
 
 
+@pytest.mark.slow
 def test_every_estimator_sees_the_same_draws_and_one_filter_flies_one_truth():
     # Encoders without quantisation: with 256 lines a round-off difference between two filters
     # flips an encoder count now and then, and the loop amplifies it (docs/closed-loop.md).
@@ -307,6 +309,8 @@ def test_a_perfect_estimate_hands_the_controller_the_truth(formulation):
 
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
 @pytest.mark.parametrize("loop", ["truth", "measured", "estimate"])
+@pytest.mark.integration
+@pytest.mark.slow
 def test_every_loop_flies_every_quadrotor_formulation(tmp_path, formulation, loop):
     cfg = _cfg(f"loop={loop}", f"model.formulation={formulation}", "duration=0.5", "scenario=attitude_steps",
                "estimator=[ekf]", "workers=1", "output.figures=false", "output.saved_runs=1")  # fmt: skip
@@ -329,6 +333,7 @@ def test_every_loop_flies_every_quadrotor_formulation(tmp_path, formulation, loo
         (["loop=truth", "closed_loop.settling_band=1.5"], "closed_loop.settling_band", "(0, 1)"),
     ],
 )
+@pytest.mark.integration
 def test_bad_loop_settings_fail_in_one_line_before_any_work(tmp_path, overrides, key, allowed):
     cfg = _cfg(*overrides)
     settings = data_settings(cfg)
@@ -340,6 +345,8 @@ def test_bad_loop_settings_fail_in_one_line_before_any_work(tmp_path, overrides,
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_the_sweep_report_puts_the_loop_modes_side_by_side(tmp_path):
     for job, loop in enumerate(("measured", "estimate")):
         cfg = _cfg(f"loop={loop}", "duration=0.5", "scenario=attitude_steps", "scenario.steps=[[0.2,0.0,4.0]]",

@@ -76,6 +76,7 @@ def files(folder: Path) -> set[str]:
     return {p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()}
 
 
+@pytest.mark.slow
 def test_compact_output_writes_exactly_the_compact_files(sweeps):
     groups = pd.read_csv(sweeps["full"] / "versus_best.csv")["group"].unique()
     figures = {f"figures/versus_best_srukf_{g.replace(' ', '_')}.png" for g in groups}
@@ -90,6 +91,7 @@ def test_compact_output_writes_exactly_the_compact_files(sweeps):
     assert "Wall time of the sweep: " in (sweeps["compact"] / "timing.md").read_text()
 
 
+@pytest.mark.slow
 def test_the_cell_table_agrees_with_the_full_aggregate(sweeps):
     """One row per cell with the full aggregate's numbers: the versus-best columns of
     ``versus_best.csv``, the diverged runs of ``divergence.csv``, the same counts and timing, and
@@ -128,6 +130,7 @@ def test_the_cell_table_agrees_with_the_full_aggregate(sweeps):
         assert row["ekf rmse_mean"] == pytest.approx(expected, rel=1e-5)
 
 
+@pytest.mark.slow
 def test_quadest_aggregate_keeps_the_sweeps_own_output(sweeps, tmp_path):
     """Without ``--output`` a re-aggregation writes what the sweep's ``multirun.yaml`` asks for."""
     again = tmp_path / "again"
@@ -136,6 +139,7 @@ def test_quadest_aggregate_keeps_the_sweeps_own_output(sweeps, tmp_path):
     assert files(again / "aggregate") == files(sweeps["compact"])
 
 
+@pytest.mark.slow
 def test_a_bad_output_fails_in_one_line_before_any_job(tmp_path):
     out = tmp_path / "never"
     proc = quadest(tmp_path, out, "hydra.callbacks.aggregate.output=tiny")

@@ -54,6 +54,7 @@ def synthetic_result(data, nees_t: np.ndarray, nis_t: np.ndarray, alive_t: np.nd
 
 
 @pytest.mark.parametrize("model", MODELS)
+@pytest.mark.slow
 def test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimension_for_nis(model):
     """The shares in the summary entry equal the shares of scipy's χ² quantiles with d = the
     model's error dimension (NEES) and its primary measurement dimension (NIS; a model without a
@@ -81,6 +82,7 @@ def test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimens
         assert expected_share(nees_t, alive_t, m) != expected_share(nees_t, alive_t, n)
 
 
+@pytest.mark.slow
 def test_the_family_has_models_whose_dimensions_differ():
     """The property above has teeth only where n ≠ m: the registered family has such models."""
     dims = {}

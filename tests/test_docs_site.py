@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -19,12 +21,14 @@ def build(root: Path, site: Path) -> subprocess.CompletedProcess:
     return subprocess.run(command, cwd=root, env=env, capture_output=True, text=True, check=False)
 
 
+@pytest.mark.slow
 def test_site_builds_strictly(tmp_path: Path):
     done = build(ROOT, tmp_path / "site")
     assert done.returncode == 0, done.stdout + done.stderr
     assert (tmp_path / "site" / "reference" / "estimators" / "index.html").is_file()
 
 
+@pytest.mark.slow
 def test_a_broken_link_fails_the_build(tmp_path: Path):
     """The strict build is what catches a broken link: shown on a copy with one link broken."""
     copy = tmp_path / "repo"

@@ -414,6 +414,7 @@ def test_singular_cloud_covariance_makes_nees_unavailable_not_a_divergence():
     assert set(table["proposal"]) == {"[1.0, 2.0]"}  # list-valued parameters tabulate as text
 
 
+@pytest.mark.integration
 def test_job_summary_reports_nis_per_sensor(tmp_path, monkeypatch):
     """summary.json carries the mean NIS of every further sensor (here: velocity every 3rd step)."""
     import json

@@ -90,6 +90,7 @@ def _final_position_error(folder, period: float) -> float:
     return float(np.linalg.norm(x[0, 4:7] - data.truth[0, -1, 4:7]))
 
 
+@pytest.mark.slow
 def test_the_ins_flies_the_reference_with_the_readers_imu(tmp_path):
     """The frames agree (z up, gravity along −z, quaternions scalar first body → world, biases as
     measured − true): the strapdown error of the reader's IMU against the reader's reference is the
@@ -142,6 +143,7 @@ def _drop_column(header: str, name: str) -> str:
     [("no folder", "no_such"), ("no reference file", "state_groundtruth_estimate0/data.csv is missing"),
      ("no a_RS_S_y column", "a_RS_S_y"), ("no q_RS_w column", "q_RS_w")],
 )  # fmt: skip
+@pytest.mark.slow
 def test_a_bad_folder_is_refused_in_one_line_naming_the_key(tmp_path, breakage, said):
     s = stamps(PERIOD_NS, 5)
     imu_header = _drop_column(IMU_HEADER, "a_RS_S_y") if "a_RS_S_y" in breakage else IMU_HEADER
@@ -169,6 +171,8 @@ def _quadest(args, cwd):
     )
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_quadest_refuses_a_folder_without_the_imu_file_with_exit_2(tmp_path):
     (tmp_path / "empty" / "mav0").mkdir(parents=True)
     proc = _quadest(["model=ins", f"model.recording={tmp_path / 'empty'}", f"hydra.run.dir={tmp_path / 'o'}"], tmp_path)
@@ -182,6 +186,8 @@ def test_quadest_refuses_a_folder_without_the_imu_file_with_exit_2(tmp_path):
     ("model", "extra", "truth_columns", "written_columns"),
     [("ins", ["model.aiding=[gps]"], slice(4, 7), slice(0, 3)), ("attitude", [], slice(0, 4), slice(3, 7))],
 )
+@pytest.mark.integration
+@pytest.mark.slow
 def test_quadest_runs_on_a_euroc_folder(tmp_path, model, extra, truth_columns, written_columns):
     """The whole job, with the written reference as the truth of ``timeseries.npz`` (position for
     the INS, the quaternion for the attitude filter) and finite errors for every state."""

@@ -67,6 +67,7 @@ def test_an_experiment_name_is_in_one_folder_only():
 
 
 @pytest.mark.parametrize("name", FILES + GROUP_NAMES)
+@pytest.mark.slow
 def test_the_one_way_runs_every_experiment_as_its_file_declares(name):
     """``quadest experiment=NAME runs=2`` composes the experiment with the override, and a sweep
     stays a sweep: Hydra's mode, the grid (``hydra.sweeper.params``) and the end-of-sweep
@@ -88,6 +89,7 @@ def test_the_one_way_runs_every_experiment_as_its_file_declares(name):
 
 
 @pytest.mark.parametrize("name", FILES)
+@pytest.mark.slow
 def test_the_old_form_is_what_the_one_way_runs(name):
     """For a file of ``experiments/``, ``quadest experiment=NAME ...`` hands Hydra exactly
     ``--config-dir experiments --config-name NAME ...`` (the records of the checked-in results

@@ -231,6 +231,7 @@ def test_the_paired_line_says_when_its_test_cannot_reach_significance(states):
     assert math.floor(math.log2(2 * states / SIGNIFICANCE)) + 1 == needed  # 2 m 2^-n < 0.05 (40 m is no power of 2)
 
 
+@pytest.mark.slow
 def test_a_sweep_with_a_failed_cell_exits_non_zero_and_keeps_the_others(tmp_path):
     """One cell refused (a bad value found in the cell), one run: exit status 3, the finished
     cell's outputs are kept, the failed cell's summary says why."""
@@ -267,6 +268,7 @@ class _Refuses:
 
 
 @pytest.mark.parametrize("workers", [1, 2])
+@pytest.mark.slow
 def test_an_estimator_refusing_its_configuration_fails_the_job_not_its_runs(workers):
     from quadest.app.estimator_runs import RunSettings, run_estimators
     from quadest.app.schema import CacheConf

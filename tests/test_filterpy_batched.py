@@ -20,6 +20,7 @@ BASELINES = {
 
 @pytest.mark.parametrize("baseline", sorted(BASELINES))
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
+@pytest.mark.slow
 def test_batched_model_evaluation_gives_the_per_run_numbers(formulation, baseline):
     """Both adapters run one filterpy filter per run; only where the model (f, h and, for the
     EKF, F, H) is evaluated differs, and the model gives the same floats for one run's rows as for

@@ -27,6 +27,7 @@ def test_a_grid_too_large_for_the_state_is_refused_before_any_work(tmp_path):
         validate(compose_config(["model=ins", "estimator=[ghkf]"]))
 
 
+@pytest.mark.integration
 def test_a_grid_too_large_only_when_augmented_fails_the_job(tmp_path):
     """UNGM: n = 1 passes validation at p = 100, the augmented dimension 3 (100^3 points) does not."""
     cfg = compose_config(["model=ungm", "estimator=[ghkf]", "estimator.ghkf.p=100", "estimator.ghkf.augmented=true",

@@ -175,6 +175,7 @@ def test_points_on_a_manifold_use_its_boxplus_and_the_mean_its_boxminus():
     np.testing.assert_allclose(D, sigma_points(rule, np.zeros((1, 1)), S), atol=1e-15)
 
 
+@pytest.mark.slow
 def test_ekpf_proposal_is_filterpys_kalman_step_from_every_particle():
     """The EKPF's proposal (μ_i, P̂_i) is one Kalman step from each particle's (x_i, P_i) with the
     proposal's own Q and R: filterpy's KalmanFilter, particle by particle."""

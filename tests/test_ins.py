@@ -78,6 +78,7 @@ def test_gps_white_noise_rate_and_latency():
     np.testing.assert_allclose(late.values[:, late.available][:, 1:], (delayed + white)[:, 1:], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_gps_drift_is_stationary_gauss_markov():
     """One sample per run at two steps 1 s apart: variance σ² at each and correlation
     φ = exp(−1 s / τ) between them (runs independent)."""
@@ -139,6 +140,7 @@ def _ins_data(*overrides: str):
     return build_data(data_settings(cfg))
 
 
+@pytest.mark.slow
 def test_common_random_numbers_across_sensors_and_estimators():
     full = _ins_data()
     only_vision = _ins_data("model.aiding=[vision]")
@@ -304,6 +306,7 @@ def test_strapdown_midpoint_attitude_error_is_within_the_midpoint_rule_bound():
 
 
 @pytest.mark.parametrize("estimator", ["mekf", "ckf"])
+@pytest.mark.slow
 def test_nees_on_the_figure_eight_lies_in_its_chi2_band(estimator):
     """At one step per second, the NEES averaged over N runs is χ²(15 N)/N when the filter is
     consistent (runs independent). Each of the 10 checked steps must lie in its two-sided band at

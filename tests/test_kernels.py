@@ -532,6 +532,7 @@ print(json.dumps([name for name in names if compiled is not None and getattr(com
 
 
 @pytest.mark.parametrize(("backend", "loaded"), [("numba", 4), ("numpy", 0)])
+@pytest.mark.integration
 def test_building_an_estimator_loads_the_kernels_before_any_timed_step(backend, loaded):
     """numba's first call in a process initialises its compiler (tenths of a second); the runner
     times ``initialize`` and the steps, so the kernels are loaded when the estimator is built."""

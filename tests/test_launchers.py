@@ -79,6 +79,7 @@ def run_two_cells(tmp_path: Path, launcher_overrides: list[str], env: dict[str, 
     return out
 
 
+@pytest.mark.slow
 def test_submitit_local_sweep_runs_both_cells_and_aggregates(tmp_path):
     run_two_cells(tmp_path, ["hydra/launcher=submitit_local", "hydra.launcher.timeout_min=5"])
 
@@ -148,6 +149,7 @@ def fake_slurm(tmp_path: Path) -> tuple[dict[str, str], Path]:
 SLURM = ["hydra/launcher=slurm", "hydra.launcher.partition=debug", "hydra.launcher.array_parallelism=1"]
 
 
+@pytest.mark.slow
 def test_slurm_launcher_submits_an_array_with_the_documented_resources(tmp_path):
     env, record = fake_slurm(tmp_path)
     run_two_cells(tmp_path, SLURM, env=env)
@@ -163,6 +165,7 @@ def test_slurm_launcher_submits_an_array_with_the_documented_resources(tmp_path)
         assert line in script, line
 
 
+@pytest.mark.slow
 def test_a_slurm_sweep_with_a_failed_cell_exits_with_the_sweep_failed_status(tmp_path):
     """The cells run as array tasks in other processes (on a cluster, other nodes): the one whose
     value is refused inside the job still makes the submitting ``quadest`` exit 3 with one line,

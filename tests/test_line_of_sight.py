@@ -163,6 +163,7 @@ def test_bad_line_of_sight_settings_fail_before_any_work(override, key, allowed)
 
 
 @pytest.mark.parametrize("estimator", ["mekf", "hckf"])
+@pytest.mark.slow
 def test_filters_on_line_of_sight_are_consistent_on_the_figure_eight(estimator):
     """Vision only (line of sight, Gaussian σ = 2.5e-3): at one step per second the NEES averaged
     over N runs is χ²(15 N)/N for a consistent filter; each of the 8 checked steps must lie in its

@@ -214,6 +214,8 @@ JOBS = {
 
 
 @pytest.mark.parametrize("kind", JOBS)
+@pytest.mark.integration
+@pytest.mark.slow
 def test_every_job_kind_writes_the_documented_columns(kind, tmp_path):
     cfg = compose_config([*JOBS[kind], "workers=1", "progress=false", "output.figures=false", "cache.enabled=false"])
     run_job(cfg, tmp_path)
@@ -230,6 +232,7 @@ def test_every_job_kind_writes_the_documented_columns(kind, tmp_path):
     assert not _undocumented(summary["metric_keys"], _documented("## Per-estimator metrics"), set())
 
 
+@pytest.mark.integration
 def test_the_sweep_aggregate_reads_every_declared_metric(tmp_path):
     for job in range(2):
         cfg = compose_config(["runs=12", "duration=0.3", "estimator=[ekf]", f"seed={job}", "workers=1",
@@ -246,6 +249,7 @@ def test_the_sweep_aggregate_reads_every_declared_metric(tmp_path):
         "## Per-estimator metrics") | {"job", "ci95_low", "ci95_high", "seed"}, set())  # fmt: skip
 
 
+@pytest.mark.integration
 def test_the_worked_example_of_docs_metrics_adds_its_column(tmp_path):
     """The one-file metric of docs/metrics.md, registered, gives the median of |estimate − truth|
     over steps 1..K of each saved run, computed here from timeseries.npz."""

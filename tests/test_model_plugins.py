@@ -96,6 +96,7 @@ def test_the_data_key_covers_a_model_plugins_source(registered, monkeypatch):
     assert data_key(cfg) is None
 
 
+@pytest.mark.slow
 def test_no_filter_beats_the_pendulum_bound(registered):
     """The PCRLB is a bound here (the truth is the filter model): the EKF's and the SR-UKF's pooled
     MSE over 100 runs of 4 s is not below it beyond Monte Carlo error (``floor − t·SE``, t the
@@ -117,6 +118,7 @@ def test_no_filter_beats_the_pendulum_bound(registered):
         assert (pooled >= floor - t * se).all(), (name, (pooled - floor) / se)
 
 
+@pytest.mark.slow
 def test_a_comparison_runs_end_to_end(site, tmp_path):
     out = tmp_path / "run"
     args = ["model=pendulum", "estimator=[ekf,srukf]", "runs=20", "duration=4", "progress=false"]
@@ -138,6 +140,7 @@ def test_a_comparison_runs_end_to_end(site, tmp_path):
         ("model.initial_std=[0.2]", "model.initial_std=[0.2] is invalid: must list 2 values"),
     ],
 )
+@pytest.mark.slow
 def test_bad_settings_are_refused_with_one_line(site, tmp_path, override, expected):
     proc = quadest(["model=pendulum", override, f"hydra.run.dir={tmp_path / 'o'}"], tmp_path, site)
     assert proc.returncode == 2
@@ -146,6 +149,7 @@ def test_bad_settings_are_refused_with_one_line(site, tmp_path, override, expect
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_an_unknown_model_name_lists_the_options(tmp_path, site):
     proc = quadest(["model.name=pendulm", f"hydra.run.dir={tmp_path / 'o'}"], tmp_path, site)
     assert proc.returncode == 2
@@ -185,6 +189,7 @@ def test_broken_model_plugins_are_reported_and_refused(broken_site, monkeypatch)
 
 
 @pytest.mark.parametrize("selection", ["model=broken", "model.name=broken"])
+@pytest.mark.slow
 def test_selecting_a_broken_model_plugin_gives_one_line(broken_site, tmp_path, selection):
     """Selected by its YAML (whose schema quadest could not register) or by name."""
     proc = quadest([selection, f"hydra.run.dir={tmp_path / 'o'}"], tmp_path, broken_site)
@@ -194,6 +199,7 @@ def test_selecting_a_broken_model_plugin_gives_one_line(broken_site, tmp_path, s
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_broken_model_plugins_do_not_stop_other_runs(broken_site, tmp_path):
     args = ["model=linear", "runs=1", "duration=1", "progress=false", "output.figures=false", "cache.enabled=false"]
     proc = quadest([*args, f"hydra.run.dir={tmp_path / 'o'}"], tmp_path, broken_site)

@@ -39,6 +39,7 @@ def gram(S: np.ndarray) -> np.ndarray:
     return S @ np.swapaxes(S, -1, -2)
 
 
+@pytest.mark.slow
 @PROPERTY
 @given(cases)
 def test_cholupdate_update_matches_fresh_cholesky(case):
@@ -53,6 +54,7 @@ def test_cholupdate_update_matches_fresh_cholesky(case):
     assert np.allclose(np.triu(out, 1), 0.0)
 
 
+@pytest.mark.slow
 @PROPERTY
 @given(cases)
 def test_cholupdate_downdate_matches_fresh_cholesky(case):
@@ -68,6 +70,7 @@ def test_cholupdate_downdate_matches_fresh_cholesky(case):
     np.testing.assert_allclose(out, ref, rtol=1e-8, atol=1e-10)
 
 
+@pytest.mark.slow
 @PROPERTY
 @given(cases)
 def test_sequential_matrix_downdate_matches_fresh_cholesky(case):
@@ -82,6 +85,7 @@ def test_sequential_matrix_downdate_matches_fresh_cholesky(case):
     np.testing.assert_allclose(out, np.linalg.cholesky(gram(S) - gram(U)), rtol=1e-8, atol=1e-10)
 
 
+@pytest.mark.slow
 @PROPERTY
 @given(cases, st.integers(0, 6))
 def test_qr_factor_matches_cholesky_of_gram(case, extra):

@@ -62,6 +62,7 @@ def _kill_group(job: subprocess.Popen) -> None:
         pass
 
 
+@pytest.mark.slow
 def test_killing_a_job_kills_its_estimator_workers(tmp_path):
     env = {**os.environ, "QUADEST_CACHE_DIR": str(tmp_path / "cache")}
     args = [QUADEST, "estimator=[ekf,ukf]", "workers=2", "runs=10", "duration=60", "progress=false",

@@ -84,6 +84,7 @@ def _normalised_errors(cls, N: int, replicates: int, **options):
 
 
 @pytest.mark.parametrize("cls", [BootstrapPF, EKPF, UPF])
+@pytest.mark.slow
 def test_mean_and_covariance_approach_the_kalman_filter_like_one_over_root_n(cls):
     """A consistent particle filter's error obeys a CLT: RMS error ≈ c/√N with c the asymptotic
     standard deviation (in units of the posterior's). We measure c at N1 = 100 and check the

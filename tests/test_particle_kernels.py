@@ -240,6 +240,7 @@ def test_particle_filters_on_ungm_give_the_same_numbers_on_both_backends(monkeyp
     np.testing.assert_array_equal(_ungm_filter(cls), reference)
 
 
+@pytest.mark.integration
 def test_constructing_a_particle_filter_loads_every_particle_kernel_before_any_timed_call():
     """The runner times ``initialize`` and every step, so the kernels (and numba's typed list of
     generators) must be loaded when the filter is built; checked in a fresh process, where no

@@ -161,6 +161,7 @@ def seed004():
     return build_data(compose_settings(["experiment=seed004_landing", "runs=4", "duration=2.0"]))
 
 
+@pytest.mark.slow
 def test_the_ins_bound_has_no_negative_or_non_finite_variance(seed004):
     """model=ins: Q has rank 6 of 15 (one acceleration noise drives position and velocity; the
     biases have none). Every variance of the bound is finite and non-negative."""

@@ -197,17 +197,20 @@ def summary(tmp_path_factory):
         return [row for row in csv.DictReader(fh) if row["state"] == "angle"]
 
 
+@pytest.mark.slow
 def test_the_rows_are_the_books_filters_and_smoothers_in_its_order(summary):
     labels = ["ekf", "ukf", "ckf", "ghkf", "iekf", "iplf"]
     assert [row["estimator"] for row in summary] == [x for label in labels for x in (label, label + "+smoothed")]
 
 
 @pytest.mark.parametrize("label", sorted(PUBLISHED))
+@pytest.mark.slow
 def test_iterated_smoothers_reproduce_the_companions_published_rmse(summary, label):
     ours = float(next(row["rmse_mean"] for row in summary if row["estimator"] == label))
     assert ours == pytest.approx(PUBLISHED[label], rel=RTOL, abs=0.0)
 
 
+@pytest.mark.slow
 def test_every_filter_and_smoother_equals_the_books_equations(summary, reference):
     for row in summary:
         assert float(row["rmse_mean"]) == pytest.approx(reference[row["estimator"]], rel=RTOL, abs=0.0), row[

@@ -46,6 +46,7 @@ KINDS = {
 
 
 @pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.slow
 def test_every_job_kind_runs_through_the_one_pipeline(kind, tmp_path, monkeypatch):
     """One call each of the estimator runs (cache, workers, isolation), the table writer and the
     summary writer, whatever the kind; what they wrote is what the job returned."""
@@ -151,6 +152,7 @@ def test_a_closed_loop_job_is_served_from_the_cache(loop, tmp_path, monkeypatch)
     _assert_same(_outputs(tmp_path / "warm"), _outputs(tmp_path / "cold"))
 
 
+@pytest.mark.slow
 def test_closed_loop_estimators_fly_in_worker_processes_with_the_same_numbers(tmp_path):
     """``workers`` is result-neutral in the closed loop too: with the estimate fed back, two
     estimators flown in two processes give what one process gives (the loop must pickle)."""
@@ -222,6 +224,7 @@ class Probe:
 
 
 @pytest.mark.parametrize("workers", [1, 2])
+@pytest.mark.slow
 def test_an_estimator_that_raises_or_whose_process_dies_fails_alone(workers):
     """Whatever goes wrong with one estimator (it raises; with processes, its result cannot be
     pickled back, or its process dies) is recorded as its failure; every other estimator's result

@@ -224,6 +224,7 @@ def installed_example(tmp_path_factory) -> Path:
     return target
 
 
+@pytest.mark.slow
 def test_external_package_runs_a_comparison(installed_example, tmp_path):
     out = tmp_path / "run"
     proc = quadest(
@@ -283,6 +284,7 @@ def test_selecting_a_broken_plugin_gives_one_line(broken_plugins, tmp_path, name
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_broken_plugins_do_not_stop_other_runs(broken_plugins, tmp_path):
     proc = quadest(
         [

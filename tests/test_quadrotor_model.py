@@ -109,6 +109,7 @@ def test_euler_angle_accel_is_the_time_derivative_of_euler_rates():
 
 @pytest.mark.parametrize("formulation", ["thesis", "augmented"])
 @pytest.mark.parametrize("calibrated", [True, False])
+@pytest.mark.slow
 def test_jacobians_match_finite_differences(formulation, calibrated):
     cfg = compose_config(
         [f"model.formulation={formulation}", f"model.calibrated={calibrated}", "runs=3", "duration=4.0"]
@@ -124,6 +125,7 @@ def test_jacobians_match_finite_differences(formulation, calibrated):
         np.testing.assert_allclose(analytic, numeric, rtol=1e-6, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_filter_model_predicts_the_truth_one_step_ahead():
     """f applied to the true state with the true rotor speeds lands close to the next true
     state: the Euler discretisation error is far below the default process noise."""
@@ -221,6 +223,7 @@ def fly(name: str, duration: float = 20.0):
     return truth, refs
 
 
+@pytest.mark.slow
 def test_controller_holds_hover():
     truth, refs = fly("hover", 10.0)
     late = truth.time > 5.0
@@ -229,6 +232,7 @@ def test_controller_holds_hover():
     assert np.abs(truth.state[0, :, 2] - [r.position[2] for r in refs]).max() < 0.02
 
 
+@pytest.mark.slow
 def test_controller_tracks_figure8_within_half_a_metre():
     truth, refs = fly("figure8")
     ref = np.array([r.position for r in refs])
@@ -237,6 +241,7 @@ def test_controller_tracks_figure8_within_half_a_metre():
     assert np.sqrt(np.mean(err[truth.time > 8.0] ** 2)) < 0.3
 
 
+@pytest.mark.slow
 def test_controller_tracks_attitude_steps():
     truth, refs = fly("attitude_steps")
     ref = np.array([r.attitude for r in refs])

@@ -267,6 +267,8 @@ def replay_outputs(tmp_path_factory):
     return out, summary
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_replay_meets_the_goal_and_is_no_further_from_px4_than_the_ahrs_filters(replay_outputs):
     """The replay's goal on the shipped log (docs/replay.md): roll and pitch within 0.5 deg RMS of PX4's estimate
     after the first 5 s, and no further from it than Madgwick, Mahony and the ahrs EKF."""
@@ -278,6 +280,8 @@ def test_replay_meets_the_goal_and_is_no_further_from_px4_than_the_ahrs_filters(
             assert s["mekf", angle] <= s[anchor, angle], (angle, anchor, s.to_dict())
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_replay_writes_the_outputs_of_every_job_with_differences_to_px4(replay_outputs):
     out, summary = replay_outputs
     tables = ("metrics.csv", "rmse_summary.csv", "rmse_table.md", "paired_comparison.csv", "summary.json")
@@ -316,6 +320,8 @@ def smoothed_replay_outputs(tmp_path_factory):
     return out, run_job(_replay_config(overrides), out, overrides)
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_smoothed_replay_writes_every_rows_difference_to_the_offline_reference(smoothed_replay_outputs):
     """The offline reference's table (docs/replay.md): one line per other row (PX4's estimate
     included) and angle. Two independent checks: PX4's RMS difference to the smoothed MEKF is the
@@ -341,6 +347,8 @@ def test_smoothed_replay_writes_every_rows_difference_to_the_offline_reference(s
     assert "RMS difference to mekf+smoothed" in summary["_after_table"]
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_a_replay_without_a_smoother_writes_no_offline_reference(replay_outputs):
     out, summary = replay_outputs
     assert not (out / "difference_to_smoothed.csv").exists() and "difference_to_smoothed" not in summary

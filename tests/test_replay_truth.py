@@ -101,6 +101,7 @@ def truth_table(out: Path) -> pd.Series:
     return table.set_index(["estimator", "state"])["rms"]
 
 
+@pytest.mark.slow
 def test_the_written_log_holds_what_the_tests_rely_on(runs, tmp_path):
     """The writer's round trip: the truth topic and the parameter are read back as written."""
     path = write_log(tmp_path / "offset.ulg", YAW_OFFSET, {**EKF2_LOG, EKF2: DECLINATION})
@@ -110,6 +111,7 @@ def test_the_written_log_holds_what_the_tests_rely_on(runs, tmp_path):
     assert {"vehicle_attitude", "vehicle_attitude_groundtruth"} <= names
 
 
+@pytest.mark.slow
 def test_truth_equal_to_px4s_estimate_gives_px4_zero_error_in_every_state(runs):
     out, summary = runs["same"]
     rms = truth_table(out)
@@ -126,6 +128,7 @@ def test_truth_equal_to_px4s_estimate_gives_px4_zero_error_in_every_state(runs):
 
 
 @pytest.mark.parametrize("doc", ["outputs.md", "replay.md"])
+@pytest.mark.slow
 def test_the_docs_list_the_columns_written(runs, doc):
     """The column table of truth_errors.csv in the docs names exactly the columns written."""
     text = (Path(__file__).resolve().parents[1] / "docs" / doc).read_text()
@@ -136,6 +139,7 @@ def test_the_docs_list_the_columns_written(runs, doc):
     assert documented == list(pd.read_csv(runs["same"][0] / "truth_errors.csv").columns)
 
 
+@pytest.mark.slow
 def test_a_constant_yaw_offset_of_the_truth_is_px4s_yaw_and_attitude_error(runs):
     out, summary = runs["offset"]
     rms = truth_table(out)
@@ -152,6 +156,7 @@ def test_a_constant_yaw_offset_of_the_truth_is_px4s_yaw_and_attitude_error(runs)
         assert rms[name, "yaw"] == pytest.approx(expected, abs=FLOAT32_ATTITUDE), name
 
 
+@pytest.mark.slow
 def test_the_logs_declination_turns_every_filters_yaw_by_it(runs):
     """The same sensors with EKF2_MAG_DECL = 3.2: every filter's yaw 3.2° larger at every step,
     roll and pitch the same, and the report says where the value came from."""
@@ -168,6 +173,7 @@ def test_the_logs_declination_turns_every_filters_yaw_by_it(runs):
     assert f"no {EKF2} parameter" in same_summary["_caption"]
 
 
+@pytest.mark.slow
 def test_a_log_without_ground_truth_writes_no_truth_errors_and_says_so(runs):
     out, summary = runs["none"]
     assert not (out / "truth_errors.csv").exists()

@@ -18,6 +18,7 @@ from quadest.aggregate.reproductions_render import render_markdown
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.hygiene
 def test_ledger_is_regenerated_from_the_checked_in_results():
     """The committed ledger and its CSV equal a fresh generation: a result or claim changed without
     the ledger following (or a number typed into the ledger by hand) fails here."""
@@ -26,6 +27,7 @@ def test_ledger_is_regenerated_from_the_checked_in_results():
     assert (ROOT / "docs" / "reproductions.csv").read_text(encoding="utf-8") == table
 
 
+@pytest.mark.hygiene
 def test_every_results_file_a_claim_names_is_checked_in():
     """A claim read from a file that git ignores (a per-run table the budget keeps out) would pass
     here and fail in every clone: each must be tracked."""
@@ -37,6 +39,7 @@ def test_every_results_file_a_claim_names_is_checked_in():
                 assert claim["measure"]["file"] in tracked, (path.name, claim["claim"])
 
 
+@pytest.mark.hygiene
 def test_readme_links_the_ledger():
     assert "docs/reproductions.md" in (ROOT / "README.md").read_text(encoding="utf-8")
 

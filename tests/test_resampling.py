@@ -115,6 +115,7 @@ def test_unbiased_expected_copies(scheme):
 
 
 @pytest.mark.parametrize("scheme", RESAMPLING_SCHEMES)
+@pytest.mark.slow
 def test_batch_equals_alone_and_same_seed_same_indices(scheme):
     rng = np.random.default_rng(3)
     w = _weights(rng, 4, 30)

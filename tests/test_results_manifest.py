@@ -9,6 +9,8 @@ import shlex
 import subprocess
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 BUDGET_BYTES = 32_500_000  # results/README.md: at most 32.5 MB (10^6 bytes) in git, raised for the ledger's evidence
 
@@ -97,6 +99,7 @@ def _compose_command(command: str):
     return cfg
 
 
+@pytest.mark.slow
 def test_every_manifest_command_composes_and_validates():
     """A regeneration must not stop on a config name or key that no longer exists: each command
     composes and passes the same validation the CLI runs before any work."""

@@ -202,6 +202,7 @@ LINEAR_PAIRS = [
 
 
 @pytest.mark.parametrize("pair", LINEAR_PAIRS, ids=["huber_ckf", "srukf", "hf"])
+@pytest.mark.slow
 def test_huber_costs_a_few_percent_under_gaussian_noise_and_pays_under_outliers(pair):
     huber, parent = pair
     rel, se = _relative_difference(*_paired_rmse(huber, parent, NoiseLaw("gaussian")))

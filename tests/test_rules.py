@@ -70,6 +70,7 @@ def test_third_degree_rules_integrate_cubics_exactly(name, rule, n):
 
 
 @pytest.mark.parametrize("n", range(1, 16))
+@pytest.mark.slow
 def test_fifth_degree_cubature_integrates_quintics_exactly(n):
     rule = FifthDegreeCubatureRule()
     assert len(rule.unit_points(n)) == 2 * n * n + 1
@@ -86,6 +87,7 @@ def test_fifth_degree_cubature_is_not_seventh_degree(n):
 
 
 @pytest.mark.parametrize("n", range(1, 9))
+@pytest.mark.slow
 def test_gauss_hermite_p3_integrates_quintics_exactly(n):
     """Tensor product: p^n points, so dimensions stop at 8 here (6561 points); the rule is a
     product of 1-D rules, so exactness per coordinate carries to every dimension."""

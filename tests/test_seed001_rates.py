@@ -39,6 +39,7 @@ def test_truth_is_the_filter_model_driven_by_the_process_streams_draws(seed001):
     assert pcrlb_is_bound(cfg.model.name, data.labels)
 
 
+@pytest.mark.slow
 def test_no_filter_beats_the_pcrlb_beyond_monte_carlo_error(seed001):
     """The pooled MSE per axis (mean over runs of the per-run time-averaged squared error) may sit
     below the time-averaged bound only by Monte Carlo error: ``pooled ≥ floor − t·SE``, SE the

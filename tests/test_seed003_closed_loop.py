@@ -87,6 +87,7 @@ def test_the_ekf_is_the_linear_kalman_filter_with_phi_i_plus_f_ts_and_h_identity
         np.testing.assert_allclose(est.covariance, P, rtol=1e-7, atol=1e-7 * np.abs(P).max())
 
 
+@pytest.mark.slow
 def test_the_analytic_jacobian_is_the_derivative_of_the_continuous_dynamics():
     cfg = _cfg("loop=open")
     data = build_data(data_settings(cfg))
@@ -136,6 +137,7 @@ def test_every_command_in_flight_is_the_controllers_on_the_truth_with_the_estima
         np.testing.assert_array_equal(flight.truth.command[:, k], loop.controller.command(fed, loop.references[k]))
 
 
+@pytest.mark.slow
 def test_the_arms_share_their_draws_and_the_ekf_sees_what_the_noisy_controller_read():
     cfg = _cfg("duration=1.0")
     loop = Seed003Loop.from_settings(data_settings(cfg))
@@ -219,6 +221,8 @@ def test_the_job_builds_the_seed003_loop_for_its_model():
     assert type(closed_loop_for(data_settings(_cfg("loop=truth")))) is Seed003Loop
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_the_report_pairs_the_arms_runs_for_control_and_estimation_metrics(tmp_path):
     for job, loop in enumerate(("measured", "estimate")):
         cfg = _cfg(f"loop={loop}", "runs=3", "duration=2.5", "scenario.steps=[[0.2,0.0,4.0]]", "output.saved_runs=1")

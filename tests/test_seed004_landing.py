@@ -43,6 +43,7 @@ def test_approach_reference_is_consistent_and_ends_above_the_platform():
     np.testing.assert_allclose(sc.platform_position(0.0), [60.0, 0.0, 1.0])
 
 
+@pytest.mark.slow
 def test_the_flown_approach_starts_60_m_away_and_ends_2_m_above_the_moving_platform():
     """The truth the backstepping controller flies: 60 m from the platform at the start (up to the
     start scatter, σ = 0.05 m per axis: 5σ), and at the end 2 m above the platform's reference
@@ -137,6 +138,7 @@ def test_a_bad_approach_time_fails_before_any_work():
         validate(compose_config([EXPERIMENT, "scenario.approach_time=0"]))
 
 
+@pytest.mark.slow
 def test_a_tiny_run_finishes_with_every_estimator():
     """Two runs of 0.5 s with every estimator of the experiment: none fails, every RMSE is finite."""
     cfg = compose_config([EXPERIMENT, "runs=2", "duration=0.5"])

@@ -83,6 +83,7 @@ def named_generator(seed: int, run: int, name: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, 2**32 - 1, *words)))
 
 
+@pytest.mark.slow
 def test_the_rangefinder_measures_the_height_from_its_own_stream(registered):
     """Each sample is the true height plus ``noise`` times the draws of the run's stream
     ``sensor:rangefinder:rangefinder``, at 20 Hz; adding it changes no other draw of the data."""
@@ -101,6 +102,7 @@ def test_the_rangefinder_measures_the_height_from_its_own_stream(registered):
     assert with_it.labels["aiding"] == "gps+rangefinder"
 
 
+@pytest.mark.slow
 def test_a_sensor_draws_the_same_numbers_from_a_plugin_or_from_the_repository(registered, monkeypatch):
     """A plugin's streams are named after the sensor, not after where it is installed."""
     from quadest.simulation import aiding
@@ -157,6 +159,7 @@ def test_bad_sensor_settings_fail_before_any_work(registered, overrides, key, ex
     assert info.value.key == key and expected in str(info.value) and "\n" not in str(info.value)
 
 
+@pytest.mark.slow
 def test_the_rangefinder_runs_on_the_ins_from_the_command_line(site, tmp_path):
     out = tmp_path / "run"
     args = ["model=ins", "model.aiding=[gps,rangefinder]", "+sensor/rangefinder=lidar_lite", "estimator=[mekf]"]
@@ -177,6 +180,7 @@ def _velocity_rmse(data, name: str = "ekf") -> np.ndarray:
     return np.sqrt(np.nanmean(result.rmse[:, :3] ** 2, axis=0))
 
 
+@pytest.mark.slow
 def test_a_velocity_sensor_on_the_quadrotor_informs_the_filter(registered):
     """``model=quadrotor`` takes further sensors too: a 20 Hz velocity sensor with 1 cm/s noise
     brings the EKF's velocity RMSE well below what the MIMU alone gives (under 0.7 of it), on the same MIMU
@@ -193,6 +197,7 @@ def test_a_velocity_sensor_on_the_quadrotor_informs_the_filter(registered):
     assert (_velocity_rmse(aided) < 0.7 * _velocity_rmse(alone)).all()  # about 0.3 to 0.55 of it
 
 
+@pytest.mark.slow
 def test_a_velocity_sensor_runs_on_the_quadrotor_from_the_command_line(site, tmp_path):
     out = tmp_path / "run"
     args = ["model.aiding=[velocimeter]", "+sensor/velocimeter=px4flow", "estimator=[ekf,srukf]"]
@@ -237,6 +242,7 @@ def test_selecting_a_broken_sensor_plugin_gives_one_line(broken_site, tmp_path):
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_broken_sensor_plugins_do_not_stop_other_runs(broken_site, tmp_path):
     args = ["model=ins", "model.aiding=[gps]", "estimator=[mekf]", *SHORT]
     proc = quadest([*args, f"hydra.run.dir={tmp_path / 'o'}"], tmp_path, broken_site)
@@ -245,6 +251,7 @@ def test_broken_sensor_plugins_do_not_stop_other_runs(broken_site, tmp_path):
     assert proc.stderr.count("quadest: warning: sensor plugin") == 4
 
 
+@pytest.mark.slow
 def test_in_the_repository_a_model_and_a_sensor_are_two_files_each(tmp_path):
     """On a copy of ``src/`` and ``conf/``, the pendulum's module and YAML dropped into
     ``simulation/`` and ``conf/model/``, the rangefinder's into ``sensors/`` and

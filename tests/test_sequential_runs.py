@@ -66,6 +66,7 @@ def test_the_first_fifty_runs_of_a_hundred_run_job_are_the_fifty_run_job():
 
 
 @pytest.mark.parametrize("model", sorted(set(SMALL) - {"linear"}))
+@pytest.mark.slow
 def test_every_builder_makes_a_batch_from_its_own_runs(model):
     """Each data builder honours ``DataSettings.first_run`` (every stream, the sensors' included)."""
     whole, second = _batch(SMALL[model], 4), _batch(SMALL[model], 2, 2)
@@ -95,6 +96,7 @@ AUTO = ["model=linear", "duration=2", "sample_period=0.1", "progress=false", "ou
         "decision.batch=4", "decision.max_runs=12"]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_identical_filters_end_equivalent_at_the_first_look(tmp_path):
     """Through the ``quadest`` command: the UKF and the SR-UKF are the same filter in exact
     arithmetic, so every state's interval is [0, 0] at the first look and the job stops there."""
@@ -115,6 +117,7 @@ def test_identical_filters_end_equivalent_at_the_first_look(tmp_path):
     assert pd.read_csv(out / "metrics.csv")["run"].max() == 3
 
 
+@pytest.mark.slow
 def test_the_first_batch_is_the_fixed_job_and_a_second_auto_job_computes_nothing(tmp_path):
     """A job with ``runs = decision.batch`` and an auto job of two batches (the EKF and the UKF on
     the UNGM benchmark, far from decided after 4 runs): the auto job's first runs have the fixed

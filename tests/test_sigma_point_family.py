@@ -50,7 +50,9 @@ def _id(case) -> str:
 
 
 @pytest.mark.parametrize("augmented", [False, True])
-@pytest.mark.parametrize("case", FAMILY, ids=[_id(c) for c in FAMILY])
+@pytest.mark.parametrize(
+    "case", [pytest.param(c, id=_id(c), marks=[pytest.mark.slow] if c[0] is GHKF else []) for c in FAMILY]
+)
 def test_family_member_is_the_kalman_filter_on_a_linear_model(case, augmented):
     cls, params, bad = case
     # alpha = 1e-3 puts W0 near -1e6 (and -1e7 augmented): round-off grows by about |W0|.
@@ -84,7 +86,10 @@ def relative(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize("augmented", [False, True])
-@pytest.mark.parametrize(("name", "rule", "n"), TWINS, ids=[t[0] for t in TWINS])
+@pytest.mark.parametrize(
+    ("name", "rule", "n"),
+    [pytest.param(*t, id=t[0], marks=[pytest.mark.slow] if t[0] == "gauss-hermite" else []) for t in TWINS],
+)
 def test_square_root_form_equals_covariance_form(name, rule, n, augmented):
     model, x0, P0, u, z = _problem(n)
     cov = SigmaPointKalmanFilter(model, rule, augmented)
@@ -243,6 +248,8 @@ def test_dd1_keeps_first_order_terms_only_and_cdkf_the_second_order_too():
         assert np.isclose(est.covariance[0, 0, 0], var + 1e-12, rtol=1e-12), cls.__name__
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_linear_command_every_family_filter_matches_the_kalman_filter(tmp_path):
     """The family's acceptance command, ``quadest model=linear sample_period=0.1 duration=30
     estimator=[ukf,srukf,cdkf,srcdkf,ckf,srckf,ckf5,srckf5,ghkf]`` (3 runs here), through the job:

@@ -217,6 +217,7 @@ def scalar_observed_linear_problem(runs: int, steps: int, seed: int):
 
 @pytest.mark.parametrize("cls", [BootstrapPF, EKPF, UPF])
 @pytest.mark.parametrize("particles,trajectories", [(200, 60), (1000, 300)])
+@pytest.mark.slow
 def test_ffbsi_converges_to_the_rts_smoother_as_particles_grow(cls, particles, trajectories):
     """Each smoothed mean's error, in units of the RTS smoother's standard deviation over √M,
     has a root mean square near 1 (measured 1.2–1.3 for the bootstrap filter: the forward clouds

@@ -70,6 +70,7 @@ def test_the_smoother_is_consistent_and_better_than_the_filter_on_the_linear_mod
 
 @pytest.mark.parametrize("kind", ["fixed_interval", "fixed_lag"])
 @pytest.mark.parametrize("model,label", [("attitude", "mekf"), ("ins", "mekf"), ("ins", "srukf")])
+@pytest.mark.slow
 def test_smoothing_a_manifold_filter_lowers_its_error(model, label, kind):
     _, result = run(
         [f"model={model}", "runs=4", "duration=3.0", f"estimator=[{label}]", "progress=false"],
@@ -83,6 +84,7 @@ def test_smoothing_a_manifold_filter_lowers_its_error(model, label, kind):
     assert smoothed_total < filtered_total
 
 
+@pytest.mark.slow
 def test_ffbsi_in_a_run_repeats_and_improves_on_the_filter():
     overrides = [
         "model=ungm",
@@ -184,6 +186,7 @@ def test_a_composed_config_pickles_into_a_fresh_process(tmp_path):
     assert done.stdout.strip() == "fixed_lag"
 
 
+@pytest.mark.slow
 def test_the_command_prints_smoothed_rows_beside_the_filtered_ones(tmp_path):
     """``quadest estimator.srukf.smoother=fixed_interval``: the smoothed row is in the printed
     summary, the RMSE table, the paired comparison and summary.json, scored on the same runs."""

@@ -149,6 +149,7 @@ def quadrotor_case(data, alpha: float, beta: float, kappa):
 
 
 @pytest.mark.parametrize(("alpha", "beta", "kappa"), GRID)
+@pytest.mark.slow
 def test_srukf_equals_filterpy_ukf_on_quadrotor(quadrotor_data, alpha, beta, kappa):
     data = quadrotor_data
     n = data.model.n
@@ -174,6 +175,7 @@ class FamilySRUKF(SRUKF):
 
 
 @pytest.mark.parametrize(("alpha", "beta", "kappa"), GRID)
+@pytest.mark.slow
 def test_fused_srukf_steps_equal_the_sigma_point_family_on_quadrotor(quadrotor_data, alpha, beta, kappa, monkeypatch):
     """On the compiled backend the plain SR-UKF steps through :mod:`quadest.numerics.unscented`;
     it must give the family's numbers (the same tolerance as against filterpy) and flag the same

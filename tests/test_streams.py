@@ -76,6 +76,7 @@ SMALL = {
 
 
 @pytest.mark.parametrize("model", sorted(SMALL))
+@pytest.mark.slow
 def test_every_builder_gives_each_run_its_estimator_seed(model):
     def seeds(runs: int, seed: int = 5) -> list[np.random.SeedSequence]:
         return build_data(compose_settings([*SMALL[model], f"runs={runs}", f"seed={seed}"])).estimator_seeds

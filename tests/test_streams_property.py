@@ -57,6 +57,7 @@ def drawn_from(seed, generator: np.random.Generator) -> bool:
 
 
 @pytest.mark.parametrize("name", sorted(CONFIGS))
+@pytest.mark.slow
 def test_estimators_get_the_estimator_stream_and_share_no_draw_with_the_data(name, monkeypatch):
     cfg = compose_config([*CONFIGS[name], f"seed={SEED}", f"runs={1 if name == 'px4_replay' else RUNS}"])
     made: list[tuple[object, np.random.Generator]] = []

@@ -65,6 +65,7 @@ hydra:
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in EXPERIMENTS.glob("*.yaml")))
+@pytest.mark.slow
 def test_every_experiment_file_composes_and_validates(name):
     """The task config is validated as the CLI sees it (without the ``hydra`` node)."""
     validate(compose_experiment(name))
@@ -285,6 +286,7 @@ KEY_CHECKS = {
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in EXPERIMENTS.glob("*.yaml")))
+@pytest.mark.slow
 def test_every_swept_key_reaches_what_it_names(name):
     """Composing is not enough: for each cell of each sweep, the swept values must arrive in the
     estimators (UT parameters) or in the model and measurements (sensor grade and error scale)."""
@@ -333,6 +335,7 @@ def sweeps(tmp_path_factory) -> dict[str, Path]:
     return {launcher: run_sweep(tmp, launcher) for launcher in ("quadest_joblib", "basic")}
 
 
+@pytest.mark.slow
 def test_multirun_aggregate_has_the_expected_rows_and_columns(sweeps):
     out = sweeps["quadest_joblib"] / "aggregate"
     cells = pd.read_csv(out / "cells.csv")
@@ -370,6 +373,7 @@ def test_multirun_aggregate_has_the_expected_rows_and_columns(sweeps):
     assert "commit:" in report and "ok: 4" in report
 
 
+@pytest.mark.slow
 def test_sweep_aggregate_collects_each_cells_paired_comparison(sweeps):
     """The aggregate's paired table is every cell's own paired_comparison.csv, tagged with the job
     and its swept values (Holm's family stays the cell), plus a one-row-per-pair summary."""
@@ -385,6 +389,7 @@ def test_sweep_aggregate_collects_each_cells_paired_comparison(sweeps):
     assert "paired summary" in (root / "aggregate" / "report.md").read_text()
 
 
+@pytest.mark.slow
 def test_basic_and_joblib_launchers_give_identical_metrics(sweeps):
     a = pd.read_csv(sweeps["quadest_joblib"] / "aggregate" / "cells.csv").sort_values(["job", "estimator", "state"])
     b = pd.read_csv(sweeps["basic"] / "aggregate" / "cells.csv").sort_values(["job", "estimator", "state"])
@@ -392,6 +397,7 @@ def test_basic_and_joblib_launchers_give_identical_metrics(sweeps):
     pd.testing.assert_frame_equal(a[cols].reset_index(drop=True), b[cols].reset_index(drop=True))
 
 
+@pytest.mark.slow
 def test_aggregation_reports_failed_unfinished_and_missing_jobs(sweeps, tmp_path):
     broken = tmp_path / "broken"
     shutil.copytree(sweeps["basic"], broken)

@@ -158,6 +158,7 @@ def _write_tum(path: Path, t, p, q) -> None:
     path.write_text("\n".join(rows) + "\n")
 
 
+@pytest.mark.integration
 def test_ape_and_rpe_equal_evos(tmp_path):
     """evo 1.x (``metrics.APE`` after ``align`` without scale; ``metrics.RPE`` with ``delta`` in
     metres, all pairs chosen along the reference, relative tolerance 0.1) on the same TUM files."""
@@ -213,6 +214,7 @@ def _ins_series(p, q):
     return x[None]
 
 
+@pytest.mark.integration
 def test_the_command_reads_a_jobs_series_and_writes_trajectory_errors_csv(tmp_path):
     """An estimate that is the truth moved by a yaw and a translation has no error after either
     alignment and no relative error; a diverged run (NaN) is left out; a truth that is not the INS

@@ -58,6 +58,7 @@ def test_bad_objective_fails_with_one_line(override, message, capsys):
     assert message in err and "\n" not in err
 
 
+@pytest.mark.slow
 def test_four_optuna_trials_minimise_the_returned_objective(tmp_path):
     out = tmp_path / "search"
     proc = subprocess.run(

@@ -111,6 +111,7 @@ def handed(monkeypatch) -> list[tuple[str, Any]]:
 
 
 @pytest.mark.parametrize("job", JOBS)
+@pytest.mark.slow
 def test_every_job_hands_the_layers_below_typed_settings_only(job, handed, tmp_path):
     cfg = compose_config([*COMMON, *JOBS[job], f"cache.dir={tmp_path / 'cache'}"])
     summary = run_job(cfg, tmp_path / "out")

@@ -1453,6 +1453,20 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         'sub = metrics[metrics["estimator"] == name]; sub = sub.assign(run=sub.groupby("state").cumcount())',
         (CROSS_JOB + "test_runs_are_paired_by_their_index_not_by_their_order_in_the_file",),
     ),
+    Mutation(
+        "tests/conftest.py stops giving a test its file's layer",
+        "tests/conftest.py",
+        "            item.add_marker(layer)",
+        "            pass",
+        ("tests/test_layers.py::test_every_collected_test_carries_one_layer",),
+    ),
+    Mutation(
+        "a test file missing from the layer table",
+        "tests/conftest.py",
+        '    "test_quaternion.py": "unit",\n',
+        "",
+        ("tests/test_layers.py::test_every_test_file_has_a_layer",),
+    ),
 )  # fmt: skip
 
 PYTHON_API = "tests/test_python_api.py::"
