@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-BUDGET_BYTES = 32_500_000  # results/README.md: at most 32.5 MB (10^6 bytes) in git, raised for the ledger's evidence
+BUDGET_BYTES = 34_000_000  # results/README.md: at most 34 MB (10^6 bytes) in git, raised for the ledger's evidence
 
 
 def load_tool():
