@@ -1272,17 +1272,17 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
          B_STATISTICS + "test_the_particle_count_series_95_percent_interval_covers_95_percent",),
     ),
     Mutation(
-        "the control tables' 95 % interval with the ddof=0 standard deviation",
-        "src/quadest/closed_loop/control_metrics.py",
-        'half = float(student_t.ppf(0.975, v.size - 1) * v.std(ddof=1)',
-        'half = float(student_t.ppf(0.975, v.size - 1) * v.std()',
+        "the mean's Student-t interval with the ddof=0 standard deviation",
+        "src/quadest/evaluation/intervals.py",
+        "return x.mean(axis=0), t_quantile(n, miss) * x.std(axis=0, ddof=1) / np.sqrt(n)",
+        "return x.mean(axis=0), t_quantile(n, miss) * x.std(axis=0) / np.sqrt(n)",
         (B_STATISTICS + "test_the_closed_loop_control_tables_95_percent_intervals_cover_95_percent",),
     ),
     Mutation(
         'the sweep-versus-best paired interval at 90 %',
         "src/quadest/aggregate/versus_best.py",
-        'half = student_t.ppf(0.5 + CONFIDENCE / 2, n - 1)',
-        'half = student_t.ppf(CONFIDENCE, n - 1)',
+        "half = float(mean_and_half_width(diff, 1.0 - CONFIDENCE)[1])",
+        "half = float(mean_and_half_width(diff, 2.0 * (1.0 - CONFIDENCE))[1])",
         (B_STATISTICS + "test_the_paired_and_step_time_95_percent_intervals_cover_95_percent",),
     ),
     Mutation(

@@ -35,8 +35,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from PIL import Image
-from scipy.stats import t as student_t
 
+from quadest.evaluation.intervals import mean_and_half_width
 from quadest.evaluation.paired import CONFIDENCE, ROUND_OFF
 
 UT_PARAMETERS = ("alpha", "beta", "kappa")
@@ -87,7 +87,7 @@ def paired_interval(diff: np.ndarray) -> tuple[float, float, float]:
     n = diff.size
     if n < 2:
         return (float(diff.mean()) if n else np.nan), np.nan, np.nan
-    half = student_t.ppf(0.5 + CONFIDENCE / 2, n - 1) * diff.std(ddof=1) / np.sqrt(n)
+    half = float(mean_and_half_width(diff, 1.0 - CONFIDENCE)[1])
     return float(diff.mean()), float(diff.mean() - half), float(diff.mean() + half)
 
 

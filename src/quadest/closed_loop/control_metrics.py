@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from scipy.stats import t as student_t
 
+from quadest.evaluation.intervals import mean_and_half_width
 from quadest.quadrotor.kinematics import wrap_angle
 
 AXES = ("roll", "pitch", "yaw")
@@ -173,7 +173,7 @@ def mean_ci(values: np.ndarray) -> tuple[float, float, float, int]:
     m = float(v.mean())
     if v.size == 1:
         return m, np.nan, np.nan, 1
-    half = float(student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size))
+    half = float(mean_and_half_width(v, 0.05)[1])
     return m, m - half, m + half, int(v.size)
 
 
