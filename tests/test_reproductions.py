@@ -231,3 +231,18 @@ def test_the_smallest_wilcoxon_p_is_scipys_exact_one(runs: int):
     from scipy.stats import wilcoxon
 
     assert verdicts.minimum_p("wilcoxon", runs) == pytest.approx(wilcoxon(np.arange(1.0, runs + 1)).pvalue, rel=1e-12)
+
+
+@pytest.mark.parametrize("width", [1e-3, 1e-8, 2e-11])
+def test_a_narrow_window_prints_its_ends_and_the_value_apart(width: float):
+    """A published value held to round-off (a window of ± width relative) prints with the digits that
+    tell the window's ends and our value apart, not the three digits of the other rows."""
+    printed = 0.03463604419042699
+    low, high = printed * (1 - width), printed * (1 + width)
+    rule = verdicts.Rule("within", low, high)
+    text = rule.text()
+    ends = text[text.index("[") + 1 : text.index("]")].split(", ")
+    assert float(ends[0]) != float(ends[1])
+    assert float(ends[0]) <= low * (1 + width / 10) and float(ends[1]) >= high * (1 - width / 10)
+    digits = rule.digits()
+    assert len({f"{x:.{digits}g}" for x in (low, printed, high)}) == 3

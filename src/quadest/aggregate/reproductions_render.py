@@ -73,11 +73,11 @@ run decides gives `needs` (what would decide it); one nothing here can hold, `te
 `why`."""
 
 
-def number(x: float | None) -> str:
-    """Three significant digits, as the tables of the job outputs."""
+def number(x: float | None, digits: int = 3) -> str:
+    """Three significant digits, as the tables of the job outputs, or the ``digits`` a rule's window needs."""
     if x is None:
         return "-"
-    return "nan" if math.isnan(x) else f"{x:.3g}"
+    return "nan" if math.isnan(x) else f"{x:.{digits}g}"
 
 
 def _reading_text(outcome: Outcome) -> str:
@@ -85,7 +85,9 @@ def _reading_text(outcome: Outcome) -> str:
     if r is None:
         return f"not run: {' '.join(outcome.why.split())}"
     unit = f" {r.unit}" if r.unit else ""
-    text = f"{number(r.value)}{unit}" + ("" if r.low == r.high == r.value else f" [{number(r.low)}, {number(r.high)}]")
+    digits = outcome.rule.digits() if outcome.rule is not None else 3
+    interval = "" if r.low == r.high == r.value else f" [{number(r.low, digits)}, {number(r.high, digits)}]"
+    text = f"{number(r.value, digits)}{unit}" + interval
     if r.runs is not None:
         text += f", {r.runs} runs"
     if r.sequential is not None:

@@ -81,9 +81,19 @@ class Rule:
         """The values where the verdict can change."""
         return sorted({b for b in (self.low, self.high) if b is not None})
 
+    def digits(self) -> int:
+        """Significant digits that tell a window's two ends apart (at least 3, :func:`fmt`'s default):
+        a window of a printed value ± round-off needs about as many digits as the value was printed with."""
+        if self.kind not in ("within", "equivalent") or self.low == self.high:
+            return 3
+        scale = max(abs(self.low), abs(self.high))
+        return max(3, math.ceil(math.log10(scale / (self.high - self.low))) + 2)
+
     def text(self) -> str:
+        d = self.digits()
         if self.kind in ("within", "equivalent"):
-            return f"CI {self.kind if self.kind == 'within' else 'within the margin'} [{self.low:g}, {self.high:g}]"
+            what = self.kind if self.kind == "within" else "within the margin"
+            return f"CI {what} [{self.low:.{max(d, 6)}g}, {self.high:.{max(d, 6)}g}]"
         return f"CI {self.kind} {(self.high if self.kind == 'below' else self.low):g}"
 
 
