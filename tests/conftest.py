@@ -82,6 +82,7 @@ LAYERS: dict[str, str] = {
     "test_layers.py": "hygiene",
     "test_line_of_sight.py": "unit",
     "test_metric_parts.py": "unit",
+    "test_model_job_defaults.py": "unit",
     "test_model_plugins.py": "integration",
     "test_mutation_list.py": "hygiene",
     "test_noise_laws.py": "unit",

@@ -160,8 +160,17 @@ def sensor_schema() -> type:
     return dataclasses.make_dataclass("SensorConf", extra, bases=(SensorConf,)) if extra else SensorConf
 
 
+def model_default(model_name: str, key: str, fallback: float) -> float:
+    """``${model_default:${model.name},KEY,FALLBACK}`` in ``conf/config.yaml``: the model option's
+    own default of the job key ``KEY`` (:attr:`~quadest.simulation.spec.ModelSpec.job_defaults`),
+    else ``FALLBACK``; an experiment or a command-line value replaces the whole interpolation."""
+    spec = discover_models()[0].get(model_name)
+    return float(spec.job_defaults.get(key, fallback)) if spec is not None else float(fallback)
+
+
 def register_schemas() -> None:
-    """Store every schema in Hydra's ConfigStore (idempotent)."""
+    """Store every schema in Hydra's ConfigStore and the ``model_default`` resolver (idempotent)."""
+    OmegaConf.register_new_resolver("model_default", model_default, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="experiment_schema", node=ExperimentConf)
     models, broken = discover_models()

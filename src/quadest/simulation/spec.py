@@ -48,6 +48,10 @@ class ModelSpec:
             posterior Cramér–Rao recursion (:mod:`quadest.evaluation.pcrlb`) is a true floor on
             the MSE; otherwise it is reported as a reference only. For a model whose truth is a
             setting, a function of the data's ``labels`` (``MonteCarloData.labels``) saying it.
+        job_defaults: the model's own values of the job keys :data:`JOB_DEFAULT_KEYS`
+            (``duration``, ``sample_period``, ``divergence_bound``), used where neither an experiment
+            nor the command line sets them (``conf/config.yaml`` reads them through the
+            ``model_default`` resolver); a key left out keeps the job's default.
     """
 
     name: str
@@ -57,6 +61,11 @@ class ModelSpec:
     validate: Callable[[DataSettings], None] = _no_checks
     uses_quadrotor_groups: bool = False
     pcrlb_is_bound: bool | Callable[[Mapping[str, Any]], bool] = False
+    job_defaults: Mapping[str, float] = dataclasses.field(default_factory=dict)
+
+
+JOB_DEFAULT_KEYS = ("duration", "sample_period", "divergence_bound")
+"""The job keys a model may give its own default for (:attr:`ModelSpec.job_defaults`)."""
 
 
 def spec_problems(spec: object) -> list[str]:
@@ -71,4 +80,9 @@ def spec_problems(spec: object) -> list[str]:
     for member in ("build", "state_dimension", "validate"):
         if not callable(getattr(spec, member)):
             problems.append(f"its {member} must be callable")
+    for key, value in dict(spec.job_defaults).items():
+        if key not in JOB_DEFAULT_KEYS:
+            problems.append(f"its job_defaults key {key!r} is not one of {list(JOB_DEFAULT_KEYS)}")
+        elif not (isinstance(value, int | float) and not isinstance(value, bool) and value > 0):
+            problems.append(f"its job_defaults.{key} must be a number > 0, got {value!r}")
     return problems

@@ -108,4 +108,7 @@ def build_ungm_data(settings: DataSettings) -> MonteCarloData:
 
 
 LINEAR = ModelSpec("linear", LinearModelConf, build_linear_data, lambda _: 4, validate_linear, pcrlb_is_bound=True)
-UNGM = ModelSpec("ungm", UNGMModelConf, build_ungm_data, lambda _: 1, validate_ungm, pcrlb_is_bound=True)
+# UNGM's time is its step index (f uses cos(1.2 k)): one step per second; 50 steps as in Gordon, Salmond &
+# Smith (1993); errors of 2|x| from the sign ambiguity of x^2/20 are the model's, not a divergence.
+UNGM = ModelSpec("ungm", UNGMModelConf, build_ungm_data, lambda _: 1, validate_ungm, pcrlb_is_bound=True,
+                 job_defaults={"duration": 50.0, "sample_period": 1.0, "divergence_bound": 1.0e6})  # fmt: skip
