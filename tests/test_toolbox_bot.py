@@ -26,8 +26,14 @@ import pytest
 import scipy.linalg
 
 from quadest.config.settings import DataSettings
+from quadest.errors import ConfigError
 from quadest.models.bearings_only import BearingsOnlyModel, BearingsOnlyModelConf
-from quadest.simulation.bearings_only_data import build_bearings_only_data, simulate_truth, turn_transition
+from quadest.simulation.bearings_only_data import (
+    build_bearings_only_data,
+    simulate_truth,
+    turn_transition,
+    validate_bearings_only,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULT = ROOT / "results" / "toolbox_bot" / "rmse_summary.csv"
@@ -95,6 +101,17 @@ def test_a_runs_truth_does_not_depend_on_the_run_count_or_the_duration():
 def test_without_a_turn_the_target_goes_straight():
     x = simulate_truth(np.array([0.0, 0.0, 1.0, 0.0]), np.zeros((1, 3)), DT)
     assert np.array_equal(x[0, -1], [2 * DT, 0.0, 1.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [("bearing_std", 0.0), ("q", -0.1), ("sensor_y", [1.0]), ("P0", [0.1, 0.1, 10.0]), ("P0", [0.1, 0.0, 10.0, 10.0]),
+     ("turn_starts", [0, 200]), ("turn_steps", 0), ("turn_rate_std", -0.01)],
+)  # fmt: skip
+def test_a_value_out_of_range_is_one_error_naming_its_key(key, value):
+    with pytest.raises(ConfigError, match=f"model.{key}"):
+        validate_bearings_only(settings(runs=1, duration=0.1, **{key: value}))
+    validate_bearings_only(settings(runs=1, duration=0.1))
 
 
 # --- the measurement ----------------------------------------------------------------------------------
