@@ -132,6 +132,7 @@ LAYERS: dict[str, str] = {
     "test_streams_property.py": "integration",
     "test_style.py": "hygiene",
     "test_sweeps.py": "integration",
+    "test_toolbox_bot.py": "unit",
     "test_trajectory_errors.py": "unit",
     "test_tuning.py": "integration",
     "test_typed_settings.py": "integration",

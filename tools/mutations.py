@@ -1505,6 +1505,52 @@ MUTATIONS += (  # the Python API (docs/python-api.md): the command's numbers, on
     ),
 )  # fmt: skip
 
+TOOLBOX_BOT = "tests/test_toolbox_bot.py::"
+MUTATIONS += (  # the toolbox manual's bearings-only tracking (docs/toolbox-bot.md)
+    Mutation(
+        "model=bearings_only's bearing residual not wrapped to (-pi, pi]",
+        "src/quadest/models/bearings_only.py",
+        "return wrap_angle(z - predicted)",
+        "return z - predicted",
+        (TOOLBOX_BOT + "test_a_bearing_across_plus_minus_pi_is_a_small_residual",),
+    ),
+    Mutation(
+        "the toolbox's turning target turns the other way (the sign of F's turn rate)",
+        "src/quadest/simulation/bearings_only_data.py",
+        "T[..., 2, 2], T[..., 2, 3], T[..., 3, 2], T[..., 3, 3] = c, s, -s, c",
+        "T[..., 2, 2], T[..., 2, 3], T[..., 3, 2], T[..., 3, 3] = c, -s, s, c",
+        (TOOLBOX_BOT + "test_the_closed_form_step_is_the_matrix_exponential",),
+    ),
+    Mutation(
+        "the toolbox's turns one step late",
+        "src/quadest/simulation/bearings_only_data.py",
+        "a[b, int(start) : int(start) + L] = mean",
+        "a[b, int(start) + 1 : int(start) + 1 + L] = mean",
+        (TOOLBOX_BOT + "test_the_truth_steps_through_exp_F_dt_with_each_runs_turn_rates",),
+    ),
+    Mutation(
+        "the bearing Jacobian with its columns swapped, as the toolbox manual prints it",
+        "src/quadest/models/bearings_only.py",
+        "H[:, :, 0] = -dy / rho2\n        H[:, :, 1] = dx / rho2",
+        "H[:, :, 0] = dx / rho2\n        H[:, :, 1] = -dy / rho2",
+        (TOOLBOX_BOT + "test_the_bearings_and_their_jacobian_are_the_manuals",),
+    ),
+    Mutation(
+        "the 2-D position row as the squared distance",
+        "src/quadest/models/bearings_only.py",
+        "return np.linalg.norm(estimate[..., :2] - truth[..., :2], axis=-1, keepdims=True)",
+        "return np.sum((estimate[..., :2] - truth[..., :2]) ** 2, axis=-1, keepdims=True)",
+        (TOOLBOX_BOT + "test_the_position_error_is_the_euclidean_distance",),
+    ),
+    Mutation(
+        "model=bearings_only's Wiener velocity Q without its position-velocity terms",
+        "src/quadest/models/bearings_only.py",
+        "block = float(q) * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])",
+        "block = float(q) * np.array([[dt**3 / 3.0, 0.0], [0.0, dt]])",
+        (TOOLBOX_BOT + "test_the_ekf_and_its_rts_smoother_equal_an_independent_implementation",),
+    ),
+)  # fmt: skip
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""
