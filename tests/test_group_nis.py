@@ -14,6 +14,7 @@ from helpers import random_spd
 from quadest.estimators.particle import BootstrapPF
 from quadest.estimators.srukf import SRUKF
 from quadest.metrics.base import BatchStart, StepView
+from quadest.metrics.builtin import NIS
 from quadest.metrics.consistency import chi2_band
 from quadest.metrics.groups import GroupNIS, measurement_groups
 from quadest.models.base import MeasurementModel
@@ -181,3 +182,15 @@ def test_an_estimator_without_innovations_gives_nan_not_a_crash():
     overview = GroupNIS().overview(result, data.model)
     assert set(overview) == {f"nis{s}_{g}" for g in ("first", "second") for s in ("", "_in_band")}
     assert all(np.isnan(v) for v in overview.values())
+
+
+def test_a_model_without_a_primary_measurement_reports_no_whole_measurement_nis():
+    """m = 0 (the INS: every measurement is a sensor): the primary NIS of zero components is no
+    statistic, so ``mean_nis`` and ``nis_in_band`` are NaN, not 0; the sensor's group is judged."""
+    data = _problem(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 4)), {}, runs=3, steps=6)
+    result = run_estimator("srukf", SRUKF(data.model), data, 1e9)
+    overview = NIS().overview(result, data.model)
+    assert np.isnan(overview["mean_nis"]) and np.isnan(overview["nis_in_band"])
+    assert np.isnan(NIS().values(result, data.model)["mean_nis"]).all()
+    assert set(measurement_groups(data.model)) == {"velocity"}
+    assert np.isfinite(result.metric_values["nis_velocity"]).all()

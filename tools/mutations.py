@@ -151,6 +151,13 @@ MUTATIONS = (
          GROUP_NIS + "test_an_over_confident_r_on_one_group_leaves_its_band_and_no_other"),
     ),
     Mutation(
+        "the primary NIS of a model without a primary measurement (m = 0) reported as 0, in band 0 %",
+        "src/quadest/metrics/builtin.py",
+        "        if not m:\n",
+        "        if False:\n",
+        (GROUP_NIS + "test_a_model_without_a_primary_measurement_reports_no_whole_measurement_nis",),
+    ),
+    Mutation(
         "steady-state window taken from the start",
         "src/quadest/metrics/windows.py",
         "steady = slice(K - max(1, round(settings.steady * K)), K)",
