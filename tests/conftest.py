@@ -75,6 +75,7 @@ LAYERS: dict[str, str] = {
     "test_gauss_hermite_grid.py": "unit",
     "test_gaussian_filter_family.py": "unit",
     "test_gaussian_steps.py": "unit",
+    "test_group_nis.py": "unit",
     "test_import_graph.py": "hygiene",
     "test_ins.py": "unit",
     "test_kernels.py": "unit",

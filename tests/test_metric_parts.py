@@ -20,7 +20,7 @@ from quadest.errors import ConfigError
 from quadest.metrics.base import BatchStart, StepView
 from quadest.metrics.consistency import fraction_inside
 from quadest.metrics.credibility import Credibility
-from quadest.metrics.groups import GroupNEES, group_nees
+from quadest.metrics.groups import GroupNEES, marginal_mahalanobis_sq
 from quadest.metrics.quantiles import ErrorQuantiles
 from quadest.metrics.registry import register, unregister
 from quadest.metrics.settings import MetricsConf
@@ -102,7 +102,7 @@ def test_group_nees_uses_the_inverse_of_the_marginal_block():
     P = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(n)
     error = rng.normal(size=(B, n))
     index = [1, 3, 4]
-    got = group_nees(error, np.linalg.cholesky(P), index)
+    got = marginal_mahalanobis_sq(error, np.linalg.cholesky(P), index)
     expected = [error[b, index] @ np.linalg.inv(P[b][np.ix_(index, index)]) @ error[b, index] for b in range(B)]
     np.testing.assert_allclose(got, expected, rtol=1e-9)
 

@@ -71,6 +71,7 @@ SEQUENTIAL = "tests/test_sequential.py::"
 SEQUENTIAL_RUNS = "tests/test_sequential_runs.py::"
 VISIBLE = "tests/test_failures_visible.py::"
 METRIC_PARTS = "tests/test_metric_parts.py::"
+GROUP_NIS = "tests/test_group_nis.py::"
 GAUSSIAN_FAMILY = "tests/test_gaussian_filter_family.py::"
 PENDULUM_BOOK = "tests/test_pendulum_book.py::"
 FAST_PF = "tests/test_particle_fast_mode.py::"
@@ -119,6 +120,44 @@ MUTATIONS = (
         (METRIC_PARTS + "test_group_nees_uses_the_inverse_of_the_marginal_block",),
     ),
     Mutation(
+        "group NIS whitened by the full S's factor (the conditional block, not the marginal one)",
+        "src/quadest/metrics/groups.py",
+        "        return np.sum(whiten(L, vector[:, index]) ** 2, axis=-1)\n",
+        "        return np.sum(whiten(factor, vector)[:, index] ** 2, axis=-1)\n",
+        (GROUP_NIS + "test_group_nis_is_the_inverse_of_the_marginal_block_at_the_steps_each_measurement_updated",),
+    ),
+    Mutation(
+        "a sensor's group NIS averaged over every step, not the steps it reported",
+        "src/quadest/metrics/groups.py",
+        'out[f"{self.prefix}_{group}"] = self.sum[:, j] / self.count[:, j]',
+        'out[f"{self.prefix}_{group}"] = self.sum[:, j] / (self.mean_t.shape[0] - 1)',
+        (GROUP_NIS + "test_group_nis_is_the_inverse_of_the_marginal_block_at_the_steps_each_measurement_updated",
+         GROUP_NIS + "test_a_consistent_kalman_filters_groups_are_chi_square_of_their_size"),
+    ),
+    Mutation(
+        "a sensor's NIS band share over every step, not its samples",
+        "src/quadest/metrics/consistency.py",
+        "        expected &= scheduled\n",
+        "        expected &= True\n",
+        (GROUP_NIS + "test_group_nis_is_the_inverse_of_the_marginal_block_at_the_steps_each_measurement_updated",
+         GROUP_NIS + "test_a_consistent_kalman_filters_groups_are_chi_square_of_their_size"),
+    ),
+    Mutation(
+        "a measurement group judged against the whole measurement's dof",
+        "src/quadest/metrics/groups.py",
+        'super().__init__(batch, "nis", {g: len(index) for g, (_, index) in self.groups.items()})',
+        'super().__init__(batch, "nis", {g: batch.model.m for g in self.groups})',
+        (GROUP_NIS + "test_a_consistent_kalman_filters_groups_are_chi_square_of_their_size",
+         GROUP_NIS + "test_an_over_confident_r_on_one_group_leaves_its_band_and_no_other"),
+    ),
+    Mutation(
+        "the primary NIS of a model without a primary measurement (m = 0) reported as 0, in band 0 %",
+        "src/quadest/metrics/builtin.py",
+        "        if not m:\n",
+        "        if False:\n",
+        (GROUP_NIS + "test_a_model_without_a_primary_measurement_reports_no_whole_measurement_nis",),
+    ),
+    Mutation(
         "steady-state window taken from the start",
         "src/quadest/metrics/windows.py",
         "steady = slice(K - max(1, round(settings.steady * K)), K)",
@@ -128,7 +167,7 @@ MUTATIONS = (
     Mutation(
         "a band share from a single surviving step",
         "src/quadest/metrics/consistency.py",
-        "if steps.sum() < MIN_SHARE_OF_STEPS * (average_t.size - 1) or not steps.any():",
+        "if steps.sum() < MIN_SHARE_OF_STEPS * expected.sum() or not steps.any():",
         "if not steps.any():",
         (METRIC_PARTS + "test_a_band_share_over_almost_no_steps_is_not_reported",),
     ),
@@ -764,7 +803,7 @@ MUTATIONS = (
     Mutation(
         "the quadrotor ignores its further sensors",
         "src/quadest/models/quadrotor.py",
-        "return {name: MeasurementModel(s.h, s.R, s.names) for name, s in self.aiding.items()}",
+        "return {name: MeasurementModel(s.h, s.R, s.names, groups=s.groups) for name, s in self.aiding.items()}",
         "return {}",
         ("tests/test_sensor_plugins.py::test_a_velocity_sensor_on_the_quadrotor_informs_the_filter",),
     ),

@@ -151,16 +151,24 @@ class EstimatorTracker:
         self.std_hist[:, k] = np.where(keep, np.sqrt(np.clip(var, 0, None)), np.nan)
         self.comp_hist[:, k] = np.where(keep, self.companion[:s], np.nan)
 
-    def _update_sensors(self, further: list[tuple[str, np.ndarray]], u_now: np.ndarray) -> float:
-        """Further sensors available at this step, in order, with their NIS; returns the filter time."""
+    def _innovation(self) -> tuple[np.ndarray, np.ndarray]:
+        """The last update's innovation and its covariance factor, copied (the next update may
+        overwrite the estimator's own arrays)."""
+        nu, factor = self.est.innovation()
+        return np.array(nu, copy=True), np.array(factor, copy=True)
+
+    def _update_sensors(self, further: list[tuple[str, np.ndarray]], u_now: np.ndarray, innovations: dict) -> float:
+        """Further sensors available at this step, in order, with their NIS; their innovations go
+        into ``innovations``; returns the filter time."""
         spent = 0.0
         for sensor_name, z in further:
             t0 = time.perf_counter()
             self.est.update(z, u_now, sensor=sensor_name)
             spent += time.perf_counter() - t0
             if self.has_innovation:
+                innovations[sensor_name] = self._innovation()
                 total, count = self.sensor_nis[sensor_name]
-                nis_s = _mahalanobis_sq(*self.est.innovation())
+                nis_s = _mahalanobis_sq(*innovations[sensor_name])
                 live = ~self.diverged & np.isfinite(nis_s)
                 total[live] += nis_s[live]
                 count[live] += 1
@@ -188,8 +196,9 @@ class EstimatorTracker:
         est.predict(u_prev)
         est.update(z, u_now)
         self.elapsed += time.perf_counter() - t0
-        nis = _mahalanobis_sq(*est.innovation()) if self.has_innovation else np.full(B, np.nan)
-        self.elapsed += self._update_sensors(list(further), u_now)
+        innovations = {None: self._innovation()} if self.has_innovation else {}
+        nis = _mahalanobis_sq(*innovations[None]) if self.has_innovation else np.full(B, np.nan)
+        self.elapsed += self._update_sensors(list(further), u_now, innovations)
         self.flag(est.failed, k, lambda i: est.failure_reasons.get(i, "flagged by the estimator"))
 
         err = model.boxminus(est.mean, truth)
@@ -219,7 +228,7 @@ class EstimatorTracker:
             self.nees_t[k] = nees[counted].mean()
         if alive.any():
             self.nis_t[k] = nis[alive].mean()
-        view = StepView(k, err, derived, self.companion - companion_truth, factor, nees, nis, alive)
+        view = StepView(k, err, derived, self.companion - companion_truth, factor, nees, nis, alive, innovations)
         for accumulator in self.accumulators:
             accumulator.step(view)
         self._record(k)

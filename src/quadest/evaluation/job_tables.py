@@ -89,7 +89,8 @@ def metric_tables(
 def further_measures(summary: pd.DataFrame, overview: pd.DataFrame) -> str:
     """The measures beside the RMSE in short (docs/metrics.md): per filter state (every row where
     there are none) and estimator the median and 95th percentile of the absolute error and the time
-    to converge; per estimator the credibility indices and the NEES band share of each state group."""
+    to converge; per estimator the credibility indices, the NEES band share of each state group and
+    the NIS and its band share of each measurement group."""
     rows = summary[summary["quantity"] == "filter"] if (summary["quantity"] == "filter").any() else summary
 
     def cell(r) -> str:
@@ -115,7 +116,18 @@ def further_measures(summary: pd.DataFrame, overview: pd.DataFrame) -> str:
             shares = ", ".join(f"{g.removeprefix('nees_in_band_')} {_share(r[g])}" for g in groups)
             nci, inclination = _number(r["nci"]), _number(r["inclination"], "+")
             lines.append(f"  {r['estimator']:>8s}: NCI {nci}, inclination {inclination}; in band: {shares}")
+    measured = [c.removeprefix("nis_in_band_") for c in overview.columns if c.startswith("nis_in_band_")]
+    if measured:
+        lines.append("NIS per measurement group (the mean over runs and its steps; χ²(group size) when consistent) "
+                     "and its band share:")  # fmt: skip
+        for r in overview.to_dict("records"):
+            shares = ", ".join(f"{g} {_mean(r[f'nis_{g}'])} ({_share(r[f'nis_in_band_{g}'])})" for g in measured)
+            lines.append(f"  {r['estimator']:>8s}: {shares}")
     return "\n".join(lines) + "\n\n"
+
+
+def _mean(value: float) -> str:
+    return "n/a" if not np.isfinite(value) else f"{value:.3g}"
 
 
 def _number(value: float, sign: str = "") -> str:

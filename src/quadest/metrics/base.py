@@ -5,7 +5,7 @@ runner keeps for every estimator (the RMSE, NEES and NIS sums of
 :class:`~quadest.montecarlo.results.EstimatorResult`), a streaming :class:`Accumulator`:
 :meth:`Metric.start` is called once per estimator and batch with the :class:`BatchStart`,
 :meth:`Accumulator.step` once per step 1..K with a :class:`StepView` (the step's errors, the
-covariance factor, NEES, NIS and the mask of the runs still alive), and
+covariance factor, NEES, NIS, the innovations and the mask of the runs still alive), and
 :meth:`Accumulator.finish` once at the end; what it returns is kept in
 ``EstimatorResult.metric_values`` (cached with the result). The tables then read the columns
 through :meth:`Metric.values` (metrics.csv) and :meth:`Metric.overview` (the per-estimator
@@ -21,7 +21,7 @@ number). ``aggregate`` says how ``rmse_summary.csv`` (per-state columns) and the
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
 import numpy as np
@@ -62,7 +62,11 @@ class StepView:
     ``derived`` (B, d) the model's derived errors, ``companion`` (B, nc) the companion values'
     errors, ``factor`` (B, n_err, n_err) the lower factor of each run's covariance (NaN where it is
     not positive definite), ``nees`` and ``nis`` (B,) (NaN where not available), ``alive`` (B,)
-    the runs that have not diverged up to and including this step."""
+    the runs that have not diverged up to and including this step, and ``innovations`` the
+    innovation ν (B, m) and the lower factor of its covariance S (B, m, m) of each measurement
+    that updated the filter at this step (key ``None``: the primary measurement; a further
+    sensor's name), as the estimator gave them after that update (NaN for a run without one);
+    empty for an estimator without innovations (particle filters)."""
 
     k: int
     error: np.ndarray
@@ -72,6 +76,7 @@ class StepView:
     nees: np.ndarray
     nis: np.ndarray
     alive: np.ndarray
+    innovations: Mapping[str | None, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
     @property
     def rows(self) -> np.ndarray:

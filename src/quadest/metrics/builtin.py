@@ -81,10 +81,13 @@ class NIS(Metric):
         return (Column("mean_nis", "run", "per-run time average of the primary measurement's NIS (m dof)"),)
 
     def values(self, result: EstimatorResult, model: FilterModel) -> dict[str, np.ndarray]:
-        return {"mean_nis": result.mean_nis}
+        """NaN for a model without a primary measurement (m = 0: its sensors' NIS are per group)."""
+        return {"mean_nis": result.mean_nis if model.m else np.full(result.mean_nis.shape, np.nan)}
 
     def overview(self, result: EstimatorResult, model: FilterModel) -> dict[str, float]:
         m, alive = model.m, (~result.diverged).any()
+        if not m:
+            return {"mean_nis": np.nan, "nis_dof": 0, "nis_in_band": np.nan}
         return {
             "mean_nis": float(np.nanmean(result.mean_nis)) if alive else np.nan,
             "nis_dof": m,

@@ -28,12 +28,16 @@ steps 1..K: over fewer (every run diverged early) it would describe a few steps 
 "100 % in band" from one surviving step reads as a consistent filter. Otherwise NaN ("n/a")."""
 
 
-def fraction_inside(average_t: np.ndarray, dof: int, alive_t: np.ndarray) -> float:
+def fraction_inside(average_t: np.ndarray, dof: int, alive_t: np.ndarray, scheduled: np.ndarray | None = None) -> float:
     """Fraction of the time steps 1..K (with at least one live run) whose run-averaged statistic
     lies inside its 95 % band; NaN when the statistic is not available, or available on fewer than
-    :data:`MIN_SHARE_OF_STEPS` of the steps 1..K."""
+    :data:`MIN_SHARE_OF_STEPS` of the steps 1..K. ``scheduled`` (K+1,) restricts both to the steps
+    at which the statistic exists at all (a sensor's samples, for its NIS)."""
     lo, hi = chi2_band(dof, alive_t)
-    steps = (np.arange(average_t.size) > 0) & (alive_t > 0) & np.isfinite(average_t)
-    if steps.sum() < MIN_SHARE_OF_STEPS * (average_t.size - 1) or not steps.any():
+    expected = np.arange(average_t.size) > 0
+    if scheduled is not None:
+        expected &= scheduled
+    steps = expected & (alive_t > 0) & np.isfinite(average_t)
+    if steps.sum() < MIN_SHARE_OF_STEPS * expected.sum() or not steps.any():
         return float("nan")
     return float(np.mean((average_t[steps] >= lo[steps]) & (average_t[steps] <= hi[steps])))

@@ -152,6 +152,11 @@ class AttitudeFilterModel(AttitudeMetrics, FilterModel):
             )
 
     @property
+    def measurement_groups(self) -> dict[str, tuple[str, ...]]:
+        """The accelerometer (the primary measurement); the magnetometer is the sensor ``mag``."""
+        return {"accelerometer": self.measurement_names}
+
+    @property
     def sensors(self):  # type: ignore[override]
         return {"mag": MeasurementModel(self.h_mag, self.R_mag, ("mag_x", "mag_y", "mag_z"))}
 

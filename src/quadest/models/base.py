@@ -38,7 +38,7 @@ from __future__ import annotations
 import copy
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
@@ -52,12 +52,15 @@ class MeasurementModel:
     """A further sensor of a filter model: its own ``h`` (``x`` (B, K, n), ``u`` → (B, K, m)),
     noise covariance ``R`` and component names (Stone Soup's pattern: a measurement carries its
     own model, so many sensors at many rates are natural). Its samples and their availability
-    come with the data (:class:`~quadest.montecarlo.data.SensorRecord`)."""
+    come with the data (:class:`~quadest.montecarlo.data.SensorRecord`). ``groups`` names groups
+    of its components whose NIS the tables judge apart (:mod:`quadest.metrics.groups`: GPS
+    position and velocity); empty, the whole measurement is one group named after the sensor."""
 
     h: Callable[[np.ndarray, np.ndarray], np.ndarray]
     R: np.ndarray
     names: tuple[str, ...]
     residual: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    groups: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     @property
     def m(self) -> int:
@@ -202,6 +205,15 @@ class FilterModel(ABC):
             group = UNIT_GROUPS.get(unit, "states")
             groups[group] = (*groups.get(group, ()), name)
         return groups
+
+    @property
+    def measurement_groups(self) -> dict[str, tuple[str, ...]]:
+        """Named groups of the primary measurement's components (``measurement_names``) whose NIS
+        the tables judge apart, each against its own χ² band (:mod:`quadest.metrics.groups`). By
+        default one group, ``measurement``, the whole measurement (none when ``m = 0``); a model
+        overrides it where its measurement stacks several sensors (the MIMU's accelerometer and
+        gyro). Further sensors declare theirs in :attr:`MeasurementModel.groups`."""
+        return {"measurement": tuple(self.measurement_names)} if self.m else {}
 
     @property
     def error_units(self) -> tuple[str, ...]:

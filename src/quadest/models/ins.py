@@ -123,7 +123,7 @@ class InsFilterModel(AttitudeMetrics, FilterModel):
 
     @property
     def sensors(self):  # type: ignore[override]
-        return {name: MeasurementModel(s.h, s.R, s.names) for name, s in self.aiding.items()}
+        return {name: MeasurementModel(s.h, s.R, s.names, groups=s.groups) for name, s in self.aiding.items()}
 
     def _per_run_arrays(self) -> tuple[str, ...]:
         return ("gyro_errors", "accel_errors")

@@ -158,11 +158,16 @@ class QuadrotorFilterModel(FilterModel):
     def _per_run_arrays(self) -> tuple[str, ...]:
         return ("accel_errors", "gyro_errors")
 
+    @property
+    def measurement_groups(self) -> dict[str, tuple[str, ...]]:
+        """The MIMU's two triads, each judged by its own NIS."""
+        return {"accelerometer": self.measurement_names[:3], "gyro": self.measurement_names[3:]}
+
     # --- further sensors (model.aiding) ---
 
     @property
     def sensors(self):  # type: ignore[override]
-        return {name: MeasurementModel(s.h, s.R, s.names) for name, s in self.aiding.items()}
+        return {name: MeasurementModel(s.h, s.R, s.names, groups=s.groups) for name, s in self.aiding.items()}
 
     def select(self, runs: int | slice | np.ndarray) -> QuadrotorFilterModel:
         other = super().select(runs)

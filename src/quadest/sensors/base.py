@@ -130,6 +130,13 @@ class SensorModel(ABC):
     @abstractmethod
     def jacobian(self, x: np.ndarray, u: np.ndarray) -> np.ndarray: ...
 
+    @property
+    def groups(self) -> dict[str, tuple[str, ...]]:
+        """Groups of the components (``names``) whose NIS the tables judge apart
+        (:attr:`quadest.models.base.MeasurementModel.groups`); none by default: the whole
+        measurement is one group."""
+        return {}
+
     def select(self, runs: slice | np.ndarray) -> SensorModel:
         """The sensor bound to a subset of runs (a slice or index array; the same sensor unless it
         carries per-run values)."""

@@ -121,6 +121,11 @@ class GpsAiding(SensorModel):
     def names(self) -> tuple[str, ...]:  # type: ignore[override]
         return self.spec.measurement_names()
 
+    @property
+    def groups(self) -> dict[str, tuple[str, ...]]:
+        """Position and velocity apart (their errors differ in kind: drift against white noise)."""
+        return {"position": self.names[:3], "velocity": self.names[3:]} if self.spec.measure_velocity else {}
+
     def h(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         p, v = self.quantity("position", x, u), self.quantity("velocity", x, u)
         return gps_prediction(p, v, self.delay, self.spec.measure_velocity)
