@@ -50,6 +50,11 @@ def build_pendulum_data(settings: DataSettings) -> MonteCarloData:
 
 
 BOOK_PENDULUM = ModelSpec(  # the book's Euler step dt = 0.01 and its 500 steps (Särkkä & Svensson 2023, Ex. 5.1)
-    "book_pendulum", BookPendulumModelConf, build_pendulum_data, lambda _: 2, validate_pendulum,
-    pcrlb_is_bound=True, job_defaults={"duration": 5.0, "sample_period": 0.01},
+    "book_pendulum",
+    BookPendulumModelConf,
+    build_pendulum_data,
+    lambda _: 2,
+    validate_pendulum,
+    pcrlb_is_bound=True,
+    job_defaults={"duration": 5.0, "sample_period": 0.01},
 )

@@ -45,7 +45,11 @@ def build_upf_benchmark_data(settings: DataSettings) -> MonteCarloData:
 
 
 MODEL = ModelSpec(  # the truth's process noise is Gamma, not the Gaussian the recursion assumes: no bound
-    "upf_benchmark", UPFBenchmarkModelConf, build_upf_benchmark_data, lambda _: 1, validate_upf_benchmark,
+    "upf_benchmark",
+    UPFBenchmarkModelConf,
+    build_upf_benchmark_data,
+    lambda _: 1,
+    validate_upf_benchmark,
     # van der Merwe et al. (2000), §5.1: 60 time steps t = 1..60 (x_0 and 59 transitions), one per second
     job_defaults={"duration": 59.0, "sample_period": 1.0, "divergence_bound": 1.0e6},
 )
