@@ -29,10 +29,12 @@ def test_every_model_gets_its_own_defaults_else_the_jobs(name: str):
 def test_the_declaring_models_are_the_discrete_time_and_book_ones():
     """The spec values themselves, typed from their sources (docs/models.md): UNGM's 50 unit steps
     (Gordon, Salmond & Smith 1993), the UPF benchmark's 60 time steps (van der Merwe et al. 2000,
-    §5.1), the book pendulum's 500 steps of 0.01 s (Särkkä & Svensson 2023, Ex. 5.1)."""
+    §5.1), the book pendulum's and the toolbox's bearings-only 500 steps of 0.01 s (Särkkä & Svensson
+    2023, Ex. 5.1; Hartikainen, Solin & Särkkä 2011, §3.6)."""
     assert job_keys(["model=ungm"]) == {"duration": 50.0, "sample_period": 1.0, "divergence_bound": 1.0e6}
     assert job_keys(["model=upf_benchmark"]) == {"duration": 59.0, "sample_period": 1.0, "divergence_bound": 1.0e6}
     assert job_keys(["model=book_pendulum"]) == {"duration": 5.0, "sample_period": 0.01, "divergence_bound": 50.0}
+    assert job_keys(["model=bearings_only"]) == {"duration": 5.0, "sample_period": 0.01, "divergence_bound": 50.0}
 
 
 def test_the_command_line_and_an_experiment_replace_a_models_default():

@@ -1590,6 +1590,30 @@ MUTATIONS += (  # the toolbox manual's bearings-only tracking (docs/toolbox-bot.
     ),
 )  # fmt: skip
 
+MUTATIONS += (  # the ledger's narrow windows and a model's own job defaults
+    Mutation(
+        "a rule's window printed with three digits whatever its width",
+        "src/quadest/aggregate/verdicts.py",
+        "return max(3, math.ceil(math.log10(scale / (self.high - self.low))) + 2)",
+        "return 3",
+        ("tests/test_reproductions.py::test_a_narrow_window_prints_its_ends_and_the_value_apart",),
+    ),
+    Mutation(
+        "a model's job defaults ignored (the job's 20 s, 0.01 s and 50 for every model)",
+        "src/quadest/app/schema.py",
+        "return float(spec.job_defaults.get(key, fallback)) if spec is not None else float(fallback)",
+        "return float(fallback)",
+        ("tests/test_model_job_defaults.py::test_every_model_gets_its_own_defaults_else_the_jobs",),
+    ),
+    Mutation(
+        "a job default outside the three keys accepted",
+        "src/quadest/simulation/spec.py",
+        "        if key not in JOB_DEFAULT_KEYS:",
+        "        if False:",
+        ("tests/test_model_job_defaults.py::test_a_bad_job_default_makes_the_spec_unusable",),
+    ),
+)  # fmt: skip
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""

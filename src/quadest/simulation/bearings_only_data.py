@@ -115,5 +115,10 @@ def build_bearings_only_data(settings: DataSettings) -> MonteCarloData:
 
 
 MODEL = ModelSpec(  # the truth turns without process noise, not the filters' Wiener velocity model: no bound
-    "bearings_only", BearingsOnlyModelConf, build_bearings_only_data, lambda _: 4, validate_bearings_only
+    "bearings_only",
+    BearingsOnlyModelConf,
+    build_bearings_only_data,
+    lambda _: 4,
+    validate_bearings_only,
+    job_defaults={"duration": 5.0, "sample_period": 0.01},  # the manual's 500 steps of 0.01 (§3.6)
 )
