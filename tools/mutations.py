@@ -1599,6 +1599,13 @@ MUTATIONS += (  # the ledger's narrow windows and a model's own job defaults
         ("tests/test_reproductions.py::test_a_narrow_window_prints_its_ends_and_the_value_apart",),
     ),
     Mutation(
+        "a published mean's interval without the source's own Monte Carlo error",
+        "src/quadest/aggregate/reproductions.py",
+        "half = stats.t.isf((1.0 - confidence) / 2.0, n - 1) * spread * np.sqrt(1.0 / n + 1.0 / n_pub)",
+        "half = stats.t.isf((1.0 - confidence) / 2.0, n - 1) * spread * np.sqrt(1.0 / n)",
+        ("tests/test_reproductions.py::test_a_published_mean_falls_in_its_interval_as_often_as_its_confidence",),
+    ),
+    Mutation(
         "a model's job defaults ignored (the job's 20 s, 0.01 s and 50 for every model)",
         "src/quadest/app/schema.py",
         "return float(spec.job_defaults.get(key, fallback)) if spec is not None else float(fallback)",

@@ -22,6 +22,8 @@ class Reading:
     family: tuple = ()
     sequential: Sequential | None = None
     comparison: tuple = ()
+    interval: str = ""
+    """What the interval is when it is not our quantity's 95 % CI (``measure.published``)."""
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,9 @@ Every claim of a seed or a published table that quadest reproduces is one entry 
 the command that made our result, and *how to read* our number from a checked-in CSV (``measure``:
 ``file``, ``select``, ``value``, ``ci``, ``scale``, ``unit``, and optionally ``runs``, the column of
 the run count, and ``p`` with ``test``, the column of a raw two-sided test p and the test that gave
-it). Our numbers are never typed: they are read here, from ``results/``, with their 95 % confidence
-interval, and the verdict follows from the interval and the claim's rule (``expect``), five-way as
+it; or ``published``, for a source's Monte Carlo mean: :func:`published_interval`). Our numbers
+are never typed: they are read here, from ``results/``, with their 95 % confidence interval, and
+the verdict follows from the interval and the claim's rule (``expect``), five-way as
 :mod:`quadest.aggregate.verdicts` defines it: reproduced, contradicted, inconclusive, not comparable,
 not testable.
 
@@ -37,8 +38,10 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import yaml
+from scipy import stats
 
 from quadest.aggregate import verdicts as v
 from quadest.aggregate.reproduction_entries import Entry, Outcome, Reading, Sequential
@@ -47,7 +50,9 @@ from quadest.aggregate.reproductions_render import render_csv, render_markdown
 CLAIM_KEYS = {"claim", "where", "source_value", "command", "measure", "expect", "cause", "testable", "why",
               "choice", "readings", "needs"}  # fmt: skip
 READING_KEYS = {"reading", "command", "measure", "expect", "why"}
-MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit", "p", "test", "runs", "sequential"}
+MEASURE_KEYS = {"file", "select", "value", "ci", "scale", "unit", "p", "test", "runs", "sequential", "published"}
+PUBLISHED_KEYS = {"std", "runs", "rounding", "confidence"}
+"""``measure.published``: our Monte Carlo mean against a published one (:func:`published_interval`)."""
 SEQUENTIAL_COLUMNS = {"value": "estimate", "ci": ["ci_low", "ci_high"], "runs": "runs", "unit": "%"}
 """What ``sequential: true`` reads from a ``runs=auto`` job's ``decisions.csv`` (the estimate and its
 α-spending interval are already in % of the reference)."""
@@ -66,6 +71,8 @@ def read_measure(measure: dict, root: Path, label: str) -> Reading:
         raise ClaimError(f"{label}: unknown measure key(s) {sorted(unknown)}; allowed: {sorted(MEASURE_KEYS)}")
     if measure.get("sequential"):
         measure = _sequential_measure(measure, label)
+    if "published" in measure and ("ci" in measure or "runs" not in measure):
+        raise ClaimError(f"{label}: measure.published makes the interval from measure.runs; drop measure.ci")
     for key in ("file", "value"):
         if key not in measure:
             raise ClaimError(f"{label}: measure.{key} is required")
@@ -91,6 +98,12 @@ def read_measure(measure: dict, root: Path, label: str) -> Reading:
     if missing:
         raise ClaimError(f"{label}: column(s) {missing} are not in {measure['file']}")
     value, low, high = (float(row[c]) * scale for c in columns)
+    interval = ""
+    if "published" in measure:
+        published = measure["published"]
+        low, high = published_interval(value, row, published, int(row[measure["runs"]]), scale, label)
+        interval = (f"where the source's {int(published['runs'])}-run mean should fall, "
+                    f"{100 * float(published.get('confidence', 0.95)):g} %")  # fmt: skip
     if scale < 0:
         low, high = high, low
     runs = int(row[measure["runs"]]) if "runs" in measure else None
@@ -99,7 +112,33 @@ def read_measure(measure: dict, root: Path, label: str) -> Reading:
     sequential = _sequential(row, path, label) if measure.get("sequential") else None
     comparison = tuple(sorted((k, str(w)) for k, w in select.items()))
     return Reading(value, low, high, str(measure.get("unit", "")), p_raw, measure.get("test"), runs, family, sequential,
-                   comparison)  # fmt: skip
+                   comparison, interval)  # fmt: skip
+
+
+def published_interval(value: float, row: pd.Series, published: dict, runs: int, scale: float,
+                       label: str) -> tuple[float, float]:  # fmt: skip
+    """Where a published Monte Carlo mean of the same quantity should fall, given ours: ``value ±
+    (t · s · √(1/N + 1/N_pub) + rounding)``. Both means are averages of independent per-run values, so
+    their difference has standard error ``s √(1/N + 1/N_pub)``, with ``s`` our per-run standard
+    deviation (``published.std``, a column) standing in for the source's, which it rarely prints;
+    ``published.runs`` is the source's run count and ``published.rounding`` half a unit of its last
+    printed digit. ``published.confidence`` (default 0.95) is the claim file's to lower for a table
+    of several rows compared at once (Bonferroni: ``1 − 0.05/rows``). The rule ``contains`` then asks
+    whether the printed value lies in this interval."""
+    unknown = set(published) - PUBLISHED_KEYS
+    if unknown or not {"std", "runs"} <= set(published):
+        raise ClaimError(f"{label}: measure.published needs std and runs (optional rounding, confidence); "
+                         f"unknown {sorted(unknown)}")  # fmt: skip
+    if published["std"] not in row.index:
+        raise ClaimError(f"{label}: measure.published.std column {published['std']!r} is not in the file")
+    confidence = float(published.get("confidence", 0.95))
+    n, n_pub = runs, int(published["runs"])
+    if not (0.0 < confidence < 1.0 and n >= 2 and n_pub >= 1):
+        raise ClaimError(f"{label}: measure.published needs 0 < confidence < 1, our runs >= 2, the source's >= 1")
+    spread = float(row[published["std"]]) * abs(scale)
+    half = stats.t.isf((1.0 - confidence) / 2.0, n - 1) * spread * np.sqrt(1.0 / n + 1.0 / n_pub)
+    half += float(published.get("rounding", 0.0))
+    return value - half, value + half
 
 
 def _sequential_measure(measure: dict, label: str) -> dict:

@@ -67,6 +67,13 @@ they read (Bonferroni), or the ledger is refused. A comparison that ends *equiva
 inconclusive with no more runs needed (any difference is inside the margin); one *undecided* at the
 budget gives the runs its effect would need beyond it.
 
+A published Monte Carlo mean (a table of RMSEs over N_pub runs) is compared with ours through
+`measure: {..., value: rmse_mean, runs: runs, published: {std: rmse_std, runs: N_pub, rounding: 0.0005,
+confidence: 0.99375}}` and `expect: {contains: <printed value>}`: the interval is where the source's
+mean should fall given ours, ours ± (t s √(1/N + 1/N_pub) + rounding), with our per-run standard
+deviation s standing in for the source's; a table of k rows compared at once takes confidence
+1 − 0.05/k (Bonferroni).
+
 Under a reconstruction choice the source does not fix, `choice` names it and `readings` lists one
 `{reading, command, measure}` per reading (or `{reading, why}` for one not run); a claim no checked-in
 run decides gives `needs` (what would decide it); one nothing here can hold, `testable: false` and
@@ -88,6 +95,8 @@ def _reading_text(outcome: Outcome) -> str:
     digits = outcome.rule.digits() if outcome.rule is not None else 3
     interval = "" if r.low == r.high == r.value else f" [{number(r.low, digits)}, {number(r.high, digits)}]"
     text = f"{number(r.value, digits)}{unit}" + interval
+    if r.interval:
+        text += f" ({r.interval})"
     if r.runs is not None:
         text += f", {r.runs} runs"
     if r.sequential is not None:
