@@ -17,11 +17,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import compose_config
+from quadest.app.validate import validate
 from quadest.config.settings import DataSettings
+from quadest.errors import ConfigError
 from quadest.estimators.gaussian_filter import GaussianFilter
 from quadest.estimators.integrations import Integration, Taylor
 from quadest.estimators.iterated import IEKF
 from quadest.estimators.sigma_point import SigmaPointKalmanFilter
+from quadest.estimators.srukf import SRUKF
 from quadest.models.reentry import ReentryModel, ReentryModelConf
 from quadest.numerics.rules import UnscentedRule
 from quadest.runner import run_estimator
@@ -306,3 +310,20 @@ def test_a_covariance_form_augmented_ukf_on_the_rank_3_q_is_the_toolboxs_10_dime
         ref = _toolbox_ukf3(data.x0[b], data.P0, data.measurements[b])
         scale = np.abs(ref).max(axis=0)
         assert np.all(np.abs(ours[b] - ref) <= 1e-7 * scale), np.abs(ours[b] - ref).max(axis=0) / scale
+
+
+AUGMENTED_SRUKF = ["experiment=toolbox_reentry", "~estimator.ekf", "~estimator.ghkf", "~estimator.ckf",
+                   "~estimator.ukf.rule", "~estimator.ukf.iterations", "estimator.ukf.kind=srukf",
+                   "+estimator.ukf.augmented=true"]  # fmt: skip
+
+
+def test_an_augmented_unscented_filter_is_checked_in_its_augmented_dimension():
+    """κ = 3 − n_aug = −9 is valid for the augmented points (n + q + r = 12) though not for n = 5:
+    the pre-run check passes it and still refuses it unaugmented; the filter's own check refuses
+    n_aug + κ ≤ 0 (κ = −12) in one ``ConfigError``."""
+    validate(compose_config([*AUGMENTED_SRUKF, "estimator.ukf.kappa=-9"]))
+    with pytest.raises(ConfigError) as err:
+        validate(compose_config([*AUGMENTED_SRUKF, "estimator.ukf.augmented=false", "estimator.ukf.kappa=-9"]))
+    assert err.value.key == "estimator.ukf.kappa"
+    with pytest.raises(ConfigError):
+        SRUKF(_model(), alpha=0.5, beta=2.0, kappa=-12.0, augmented=True)

@@ -1498,6 +1498,13 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         ("tests/test_reentry.py::test_the_position_row_is_the_rmse_of_the_2d_position",
          "tests/test_reentry.py::test_the_ekfs_position_row_is_the_textbook_ekfs"),
     ),
+    Mutation(
+        "the pre-run UT check takes an augmented filter's dimension for the state's",
+        "src/quadest/estimators/params.py",
+        'if alpha is None or values.get("augmented"):',
+        "if alpha is None:",
+        ("tests/test_reentry.py::test_an_augmented_unscented_filter_is_checked_in_its_augmented_dimension",),
+    ),
 )  # fmt: skip
 
 PYTHON_API = "tests/test_python_api.py::"
