@@ -327,3 +327,14 @@ def test_an_augmented_unscented_filter_is_checked_in_its_augmented_dimension():
     assert err.value.key == "estimator.ukf.kappa"
     with pytest.raises(ConfigError):
         SRUKF(_model(), alpha=0.5, beta=2.0, kappa=-12.0, augmented=True)
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [("model.P0=[1e-6,1e-6,1e-6,1]", "model.P0"), ("model.sigma_bearing=0", "model.sigma_bearing"),
+     ("model.truth_q_c=[1e-4,1e-4,-1e-6]", "model.truth_q_c"), ("model.P0=[1e-6,1e-6,1e-6,1e-6,0]", "model.P0")],
+)  # fmt: skip
+def test_bad_reentry_settings_are_one_line_naming_the_key(override, key):
+    with pytest.raises(ConfigError) as err:
+        validate(compose_config(["experiment=toolbox_reentry", override]))
+    assert err.value.key == key
