@@ -1506,6 +1506,44 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
         "",
         ("tests/test_layers.py::test_every_test_file_has_a_layer",),
     ),
+    Mutation(
+        "the reentry Jacobian drops the gravity term of d(x3 rate)/dx1",
+        "src/quadest/models/reentry.py",
+        "        J[:, 2, 0] += G\n",
+        "",
+        ("tests/test_reentry.py::test_transition_jacobian_is_the_complex_step_derivative",
+         "tests/test_reentry.py::test_transition_jacobian_agrees_with_central_differences"),
+    ),
+    Mutation(
+        "the reentry bearing residual not wrapped",
+        "src/quadest/models/reentry.py",
+        "wrap_bearing(r[..., 1:])",
+        "r[..., 1:]",
+        ("tests/test_reentry.py::test_the_bearing_residual_is_wrapped",
+         "tests/test_reentry.py::test_an_update_across_the_bearings_cut_moves_the_estimate_by_a_bearing_noise_only"),
+    ),
+    Mutation(
+        "the reentry truth drawn with the filters' noise densities (its ballistic parameter wanders)",
+        "src/quadest/simulation/reentry_data.py",
+        "np.sqrt(np.array(m.truth_q_c, dtype=float)",
+        "np.sqrt(np.array(m.q_c, dtype=float)",
+        ("tests/test_reentry.py::test_the_truths_noise_enters_through_the_input_matrix",),
+    ),
+    Mutation(
+        "the reentry position row from the first coordinate only",
+        "src/quadest/models/reentry.py",
+        "np.linalg.norm(estimate[..., :2] - truth[..., :2], axis=-1, keepdims=True)",
+        "np.linalg.norm(estimate[..., :1] - truth[..., :1], axis=-1, keepdims=True)",
+        ("tests/test_reentry.py::test_the_position_row_is_the_rmse_of_the_2d_position",
+         "tests/test_reentry.py::test_the_ekfs_position_row_is_the_textbook_ekfs"),
+    ),
+    Mutation(
+        "the pre-run UT check takes an augmented filter's dimension for the state's",
+        "src/quadest/estimators/params.py",
+        'if alpha is None or values.get("augmented"):',
+        "if alpha is None:",
+        ("tests/test_reentry.py::test_an_augmented_unscented_filter_is_checked_in_its_augmented_dimension",),
+    ),
 )  # fmt: skip
 
 PYTHON_API = "tests/test_python_api.py::"

@@ -96,9 +96,11 @@ def unscented_constraints(values: Mapping[str, Any], n: int) -> list[tuple[str, 
     """The UT's points are real only when ``n + λ = α² (n + κ) > 0`` (thesis eqs 5.2–5.6), checked in
     floating point exactly as the filter computes it (:func:`quadest.numerics.sigma_points.ut_weights`:
     ``λ = α² (n + κ) − n``, then ``n + λ``). With ``n + κ > 0`` and ``n + λ`` still not > 0, α is too
-    small: ``α² (n + κ)`` is lost in the rounding of ``n`` (or underflows), and the key named is alpha."""
+    small: ``α² (n + κ)`` is lost in the rounding of ``n`` (or underflows), and the key named is alpha.
+    An augmented filter's points live in ``n + q + r`` dimensions, which only the model knows: its
+    rule checks them when the filter is built (:class:`~quadest.estimators.sigma_point.SigmaPointFilter`)."""
     alpha, kappa = values.get("alpha"), values.get("kappa", 0.0)
-    if alpha is None:
+    if alpha is None or values.get("augmented"):
         return []
     lam = alpha**2 * (n + kappa) - n
     if n + lam > 0:
