@@ -191,9 +191,10 @@ def test_a_truncated_log_replays_with_a_warning(capsys, tmp_path):
     path = tmp_path / "cut.ulg"
     path.write_bytes(data[:cut])
 
-    validate(compose_config(["experiment=px4_replay", f"source.path={path}"]))
+    validate(compose_config(["experiment=px4_replay", f"source.path={path}", "duration=20"]))
     err = capsys.readouterr().err
     assert f"quadest: warning: {path} ends in" in err and "truncated" in err
+    assert "holds 34.076 s of IMU and attitude data, of which 20.000 s are replayed" in err  # the window replayed, not the whole truncated log
 
 
 def test_a_log_shorter_than_the_duration_is_named(capsys):

@@ -138,8 +138,8 @@ def check_log_length(path: Path, settings: DataSettings) -> None:
                           f"{t_end - t0:.3f} s of IMU and attitude data, source.start={source.start:g})")  # fmt: skip
     cut = incomplete_tail(path)
     if cut:
-        warn(f"{path} ends in {cut} bytes of an incomplete message: the log was truncated; replaying its "
-             f"{t_end - t0:.3f} s of IMU and attitude data")  # fmt: skip
+        warn(f"{path} ends in {cut} bytes of an incomplete message: the log was truncated; it holds "
+             f"{t_end - t0:.3f} s of IMU and attitude data, of which {window:.3f} s are replayed")  # fmt: skip
     if math.isfinite(settings.duration) and held < settings.duration:
         warn(f"{path} holds {held:.3f} s after source.start={source.start:g}, less than "
              f"duration={settings.duration:g}; replaying to its end")  # fmt: skip
