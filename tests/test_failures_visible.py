@@ -197,6 +197,13 @@ def test_a_truncated_log_replays_with_a_warning(capsys, tmp_path):
     assert "holds 34.076 s of IMU and attitude data, of which 20.000 s are replayed" in err  # the window replayed, not the whole truncated log
 
 
+def test_an_estimator_labelled_px4_is_refused_in_a_replay():
+    """``truth_errors.csv`` names PX4's own estimate ``px4``: an estimator of that label would share its rows."""
+    overrides = ["experiment=px4_replay", "+estimator.px4.kind=mekf"]
+    with pytest.raises(ConfigError, match=r"estimator\.px4='px4' is invalid: a label other than 'px4'"):
+        validate(compose_config(overrides))
+
+
 def test_a_log_shorter_than_the_duration_is_named(capsys):
     """The shipped log holds 68.874 s of IMU and attitude data (``source.warmup``'s refusal says so):
     asking for 100 s replays it to its end, with a warning naming the log and both lengths."""

@@ -61,7 +61,7 @@ from quadest.models.attitude import attitude_errors_deg
 from quadest.montecarlo import MonteCarloData
 from quadest.montecarlo.results import EstimatorResult
 from quadest.numerics import quaternion as quat
-from quadest.replay.data import ReplayData
+from quadest.replay.data import PX4_ROW, ReplayData
 from quadest.replay.declination import to_true_north
 from quadest.replay.ulog import ATTITUDE_TRUTH, POSITION_TRUTH
 
@@ -73,8 +73,6 @@ on SO(3) (:func:`quadest.models.attitude.attitude_errors_deg`)."""
 ROW_ORDER = [1, 2, 3, 0]
 """Where each of :data:`ROWS` is in :func:`~quadest.models.attitude.attitude_errors_deg`'s output."""
 PX4 = "PX4 onboard estimate"
-PX4_ROW = "px4"
-"""PX4's own estimate as a row of ``truth_errors.csv``."""
 TRUTH_COLUMNS = ["estimator", "state", "unit", "rms"]
 SMOOTHED = "+smoothed"
 NOT_APPLICABLE = (

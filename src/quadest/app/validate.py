@@ -27,7 +27,7 @@ from quadest.estimators.smoother_settings import smoother_settings
 from quadest.evaluation.objective import validate_objective
 from quadest.numerics.square_root import requested_kernels
 from quadest.quadrotor.scenarios import SCENARIOS
-from quadest.replay.data import validate_replay
+from quadest.replay.data import PX4_ROW, validate_replay
 from quadest.sensors.noise_laws import check_noise_law
 from quadest.simulation.aiding import report_plugin_problems as report_sensor_problems
 from quadest.simulation.registry import model_spec, state_dimension
@@ -158,6 +158,9 @@ def validate(cfg: DictConfig) -> JobSettings:
     validate_model(data)
     if experiment.source is not None:
         validate_replay(data, experiment.output.saved_runs)
+        if PX4_ROW in experiment.estimator:  # truth_errors.csv names PX4's own estimate so
+            raise ConfigError(f"estimator.{PX4_ROW}", PX4_ROW, f"a label other than '{PX4_ROW}' in a log replay "
+                              "(PX4's own estimate is that row of truth_errors.csv)")  # fmt: skip
     validate_estimators(experiment, data)
     if experiment.source is None:  # a replay is one log of known length
         validate_size(experiment, data)

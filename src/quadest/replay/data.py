@@ -61,6 +61,10 @@ GAUSS_TO_MICROTESLA = 100.0
 _PACKAGE = Path(__file__).resolve().parents[1]
 
 
+PX4_ROW = "px4"
+"""PX4's own estimate as a row of ``truth_errors.csv``: no estimator of a replay may take this label."""
+
+
 def shipped_log() -> Path:
     """The flight log shipped with quadest: the wheel's copy first, the repository's second."""
     for candidate in (_PACKAGE / "data" / "px4", _PACKAGE.parents[1] / "data" / "px4"):
