@@ -50,3 +50,9 @@ def test_tables_by_hand():
         "\\begin{tabular}{ll}\n\\hline\nstate\\_x & n\\% \\\\\n\\hline\n1 $\\pm$ 2 & 3.0 \\\\\n- & 4.5 \\\\\n"
         "\\hline\n\\end{tabular}\n"
     )
+
+
+def test_a_missing_number_prints_n_a_in_markdown_as_in_the_console():
+    frame = pd.DataFrame({"estimator": ["ekf", "pf"], "mean_nis": [2.5, np.nan]})
+    lines = markdown_table(frame).splitlines()
+    assert lines[2:] == ["| ekf | 2.5 |", "| pf | n/a |"]

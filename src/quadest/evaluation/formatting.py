@@ -13,12 +13,19 @@ import pandas as pd
 
 
 def markdown_table(frame: pd.DataFrame) -> str:
-    """A GitHub-flavoured Markdown table of ``frame`` (no index)."""
+    """A GitHub-flavoured Markdown table of ``frame`` (no index); a missing number prints ``n/a``,
+    as in the console's table."""
     cols = [str(c) for c in frame.columns]
     lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
     for row in frame.itertuples(index=False):
-        lines.append("| " + " | ".join("" if v is None else str(v) for v in row) + " |")
+        lines.append("| " + " | ".join(_cell(v) for v in row) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _cell(value: object) -> str:
+    if value is None:
+        return ""
+    return "n/a" if isinstance(value, float) and math.isnan(value) else str(value)
 
 
 def latex_table(frame: pd.DataFrame) -> str:
