@@ -81,6 +81,7 @@ LAYERS: dict[str, str] = {
     "test_launchers.py": "integration",
     "test_layers.py": "hygiene",
     "test_line_of_sight.py": "unit",
+    "test_measurement_residual.py": "unit",
     "test_metric_parts.py": "unit",
     "test_model_plugins.py": "integration",
     "test_mutation_list.py": "hygiene",

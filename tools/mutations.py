@@ -1505,6 +1505,55 @@ MUTATIONS += (  # the Python API (docs/python-api.md): the command's numbers, on
     ),
 )  # fmt: skip
 
+RESIDUAL = "tests/test_measurement_residual.py::"
+WRAPPED = RESIDUAL + "test_a_wrapped_bearing_residual_keeps_every_gaussian_filter_on_the_truth"
+STRADDLING = RESIDUAL + "test_sigma_points_on_both_sides_of_the_cut_average_to_the_right_bearing"
+
+MUTATIONS += (  # every Gaussian filter conditions on the measurement's residual (a bearing across ±π)
+    Mutation(
+        "the sigma-point family's innovation by z − ẑ, not the measurement's residual",
+        "src/quadest/estimators/sigma_point.py",
+        "(z - y_pred if residual is None else residual(z, y_pred)), Sy",
+        "z - y_pred, Sy",
+        (WRAPPED + "[ckf]",),
+    ),
+    Mutation(
+        "the sigma-point family averages a wrapped measurement's points arithmetically",
+        "src/quadest/estimators/sigma_point.py",
+        "y_pred, DY = point_mean(Y, self.rule.mean_weights(dim), np.add, residual)",
+        "y_pred, DY = self._mean(Y, dim, state=False)",
+        (STRADDLING + "[ckf]",),
+    ),
+    Mutation(
+        "the batched EKFs (mekf, hf) take z − ẑ for the innovation",
+        "src/quadest/estimators/error_state_ekf.py",
+        "self._nu = meas.innovation(z, moments.mean)",
+        "self._nu = z - moments.mean",
+        (WRAPPED + "[mekf]", WRAPPED + "[hf]"),
+    ),
+    Mutation(
+        "the fused SR-UKF update taken for a measurement with its own residual",
+        "src/quadest/estimators/srukf.py",
+        " or self.model.measurement().residual is not None:",
+        ":",
+        (WRAPPED + "[srukf]",),
+    ),
+    Mutation(
+        "filterpy's EKF handed no residual",
+        "src/quadest/estimators/filterpy_ekf.py",
+        "residual=np.subtract if meas.residual is None else _column_residual(meas.residual),",
+        "residual=np.subtract,",
+        (WRAPPED + "[ekf]",),
+    ),
+    Mutation(
+        "filterpy's UKF averages a wrapped measurement's points arithmetically",
+        "src/quadest/estimators/filterpy_ukf.py",
+        "self.kf.residual_z, self.kf.z_mean = residual, _residual_mean(residual)",
+        "self.kf.residual_z, self.kf.z_mean = residual, None",
+        (STRADDLING + "[ukf-alpha=1.0-beta=0.0-kappa=1.0]",),
+    ),
+)
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""
