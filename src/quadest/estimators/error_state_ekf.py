@@ -41,10 +41,7 @@ from quadest.estimators.gaussian_steps import (
 from quadest.estimators.smoothing import SmoothingForm, linearized_smoother_step
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, psd_sqrt
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
+from quadest.numerics import matrix_transpose as _t
 
 
 @dataclass

@@ -47,12 +47,9 @@ from quadest.estimators.gaussian_steps import (
 from quadest.estimators.smoothing import SmootherStep, SmoothingForm, sigma_point_smoother_gain
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, cholupdate, psd_sqrt, qr_factor
+from quadest.numerics import matrix_transpose as _t
 from quadest.numerics.huber import HuberCounts, HuberSettings
 from quadest.numerics.rules import IntegrationRule
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
 
 
 def _block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:
