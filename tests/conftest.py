@@ -122,6 +122,7 @@ LAYERS: dict[str, str] = {
     "test_seed003_closed_loop.py": "unit",
     "test_seed004_landing.py": "unit",
     "test_sensor_plugins.py": "integration",
+    "test_sensor_rates.py": "unit",
     "test_sequential.py": "unit",
     "test_sequential_runs.py": "integration",
     "test_sigma_point_family.py": "unit",

@@ -1554,6 +1554,25 @@ MUTATIONS += (  # every Gaussian filter conditions on the measurement's residual
     ),
 )
 
+RATES = "tests/test_sensor_rates.py::"
+
+MUTATIONS += (  # a bad sensor rate: one line naming the sensor's own key and the allowed rates
+    Mutation(
+        "a sensor's sampling names the magnetometer's key for its bad rate",
+        "src/quadest/sensors/gps.py",
+        'sample_stride(spec.rate, sample_period, f"{Gps.key()}.rate")',
+        'sample_stride(spec.rate, sample_period, "model.magnetometer.rate")',
+        (RATES + "test_the_sampling_itself_names_the_sensors_own_key[gps]",),
+    ),
+    Mutation(
+        "a bad rate's error gives the rule but not the allowed rates",
+        "src/quadest/sensors/base.py",
+        "raise ConfigError(key, rate, allowed_rates(sample_period))",
+        'raise ConfigError(key, rate, f"must divide the filter rate 1/sample_period = {1.0 / sample_period:g} Hz")',
+        (RATES + "test_a_bad_rate_is_refused_naming_the_sensors_own_key_and_the_allowed_rates[30.0-gps]",),
+    ),
+)
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""
