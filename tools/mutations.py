@@ -1077,7 +1077,7 @@ MUTATIONS += (  # EuRoC-layout folders and the trajectory errors (docs/models.md
     ),
     Mutation(
         "a recording on model=ins starts one period before its first sample",
-        "src/quadest/simulation/ins_data.py",
+        "src/quadest/simulation/imu.py",
         "starts_at_first_sample=True",
         "starts_at_first_sample=False",
         (EUROC + "test_a_recording_is_cut_to_duration_and_starts_at_its_first_sample",),
@@ -1092,8 +1092,8 @@ MUTATIONS += (  # EuRoC-layout folders and the trajectory errors (docs/models.md
     Mutation(
         "the attitude model on a recording with gravity along +z",
         "src/quadest/simulation/attitude_data.py",
-        "T, np.array([0.0, 0.0, -float(mcfg.gravity)]), magnetometer.mag_earth,",
-        "T, np.array([0.0, 0.0, float(mcfg.gravity)]), magnetometer.mag_earth,",
+        "np.array([0.0, 0.0, -float(mcfg.gravity)]),",
+        "np.array([0.0, 0.0, float(mcfg.gravity)]),",
         (EUROC + "test_the_attitude_model_reads_the_folder_and_predicts_its_accelerometer",),
     ),
     Mutation(

@@ -47,9 +47,9 @@ from quadest.sensors.base import TrueMotion
 from quadest.sensors.magnetometer import Magnetometer
 from quadest.sensors.mimu import TriadErrors, TriadSpec
 from quadest.simulation.aiding import sensor_context
-from quadest.simulation.imu import interval_means, measure_mimu, read_recorded_imu
+from quadest.simulation.imu import interval_means, measure_mimu, read_recorded_imu, recorded_imu_data
 from quadest.simulation.quadrotor_data import fly_scenario
-from quadest.simulation.recorded import IMU_STEP_RTOL, recorded_data, resolve_recording
+from quadest.simulation.recorded import resolve_recording
 from quadest.simulation.spec import ModelSpec
 
 
@@ -124,9 +124,14 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 9)), P0, streams["initial"])
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
-        "model": mcfg.name, "calibrated": bool(mcfg.calibrated), "known_acceleration": known,
-        "sensor": scfg.name, "error_scale": scale, "scenario": flown.name, "mag_rate": float(mcfg.magnetometer.rate),
-    }  # fmt: skip
+        "model": mcfg.name,
+        "calibrated": bool(mcfg.calibrated),
+        "known_acceleration": known,
+        "sensor": scfg.name,
+        "error_scale": scale,
+        "scenario": flown.name,
+        "mag_rate": float(mcfg.magnetometer.rate),
+    }
     return MonteCarloData(
         model=model,
         time=truth.time,
@@ -172,18 +177,28 @@ def build_recorded_attitude_data(settings: DataSettings) -> MonteCarloData:
     scale = float(scfg.error_scale)
     Q, r_acc = _filter_noise(settings, triad_spec(scfg.gyro, scale), triad_spec(scfg.accel, scale))
     model = AttitudeFilterModel(
-        T, np.array([0.0, 0.0, -float(mcfg.gravity)]), magnetometer.mag_earth, Q, noise * r_acc * np.eye(3),
-        magnetometer.noise_covariance(), None, None, magnetometer.assumed_errors(), batch_size=runs,
-    )  # fmt: skip
-    P0 = _initial_covariance(settings)
-    offsets = draw_initial_estimates(np.zeros((runs, 9)), P0, streams["initial"])
-    x0 = model.boxplus(np.stack([r.truth[0] for r in recordings]), offsets)
+        T,
+        np.array([0.0, 0.0, -float(mcfg.gravity)]),
+        magnetometer.mag_earth,
+        Q,
+        noise * r_acc * np.eye(3),
+        magnetometer.noise_covariance(),
+        None,
+        None,
+        magnetometer.assumed_errors(),
+        batch_size=runs,
+    )
     labels = {
-        "model": mcfg.name, "recording": str(mcfg.recording), "known_acceleration": known, "sensor": scfg.name,
-        "mag_rate": float(mcfg.magnetometer.rate), **recordings[0].notes,
-    }  # fmt: skip
-    return recorded_data(settings, model, recordings, x0, P0, starts_at_first_sample=True, step_rtol=IMU_STEP_RTOL,
-                         sensors={"mag": z_mag}, labels=labels)  # fmt: skip
+        "model": mcfg.name,
+        "recording": str(mcfg.recording),
+        "known_acceleration": known,
+        "sensor": scfg.name,
+        "mag_rate": float(mcfg.magnetometer.rate),
+        **recordings[0].notes,
+    }
+    return recorded_imu_data(
+        settings, model, recordings, _initial_covariance(settings), streams, {"mag": z_mag}, labels
+    )
 
 
 MODEL = ModelSpec(  # n_err = 9: attitude error, gyro and accelerometer biases

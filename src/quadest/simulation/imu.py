@@ -12,7 +12,8 @@ recorded IMU data.
   by the trapezoid rule (a Δθ/Δv IMU's output; for the attitude filters' gyro input the midpoint
   rule of ``q_{k+1} = q_k ⊗ exp(ω̄_k T)``).
 - :func:`read_recorded_imu`: the recordings of ``model.recording``, each run's streams and the
-  settings with the recording's duration (what the aiding sensors measure over).
+  settings with the recording's duration (what the aiding sensors measure over);
+  :func:`recorded_imu_data`: the job's data from them, the IMU's first sample the filters' start.
 """
 
 from __future__ import annotations
@@ -24,11 +25,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadest.config.settings import DataSettings
+from quadest.models.base import FilterModel
 from quadest.models.quadrotor_config import triad_spec
+from quadest.montecarlo import MonteCarloData
+from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_streams
 from quadest.sensors.mimu import TriadErrors, TriadSpec, draw_triad_errors, measure_triad
 from quadest.sensors.noise_laws import NoiseLaw, noise_law_from_config
-from quadest.simulation.recorded import read_imu_recordings
+from quadest.sensors.record import SensorRecord
+from quadest.simulation.recorded import IMU_STEP_RTOL, read_imu_recordings, recorded_data
 from quadest.simulation.recording import Recording
 
 Streams = dict[str, list[np.random.Generator]]
@@ -102,3 +107,32 @@ def read_recorded_imu(settings: DataSettings) -> tuple[list[Recording], Streams,
     streams = run_streams(int(settings.seed), int(settings.runs), settings.first_run)
     time = recordings[0].time
     return recordings, streams, dataclasses.replace(settings, duration=float(time[-1] - time[0]))
+
+
+def recorded_imu_data(
+    settings: DataSettings,
+    model: FilterModel,
+    recordings: list[Recording],
+    P0: np.ndarray,
+    streams: Streams,
+    sensors: dict[str, SensorRecord],
+    labels: dict[str, object],
+) -> MonteCarloData:
+    """The data of IMU ``recordings`` (their truth in ``model``'s state), one run each, by
+    :func:`~quadest.simulation.recorded.recorded_data`: the recording's first sample is the
+    filters' start (its first input drives the first step), its step ``sample_period`` to a
+    logger's jitter (``IMU_STEP_RTOL``); the filters start at ``truth ⊞ L0 w``, ``P0 = L0 L0ᵀ``,
+    ``w ~ N(0, I)`` from each run's ``"initial"`` stream."""
+    offsets = draw_initial_estimates(np.zeros((int(settings.runs), P0.shape[0])), P0, streams["initial"])
+    x0 = model.boxplus(np.stack([r.truth[0] for r in recordings]), offsets)
+    return recorded_data(
+        settings,
+        model,
+        recordings,
+        x0,
+        P0,
+        starts_at_first_sample=True,
+        step_rtol=IMU_STEP_RTOL,
+        sensors=sensors,
+        labels=labels,
+    )

@@ -55,9 +55,9 @@ from quadest.quadrotor.scenarios import PlatformApproach
 from quadest.sensors.base import TrueMotion
 from quadest.sensors.mimu import TriadErrors
 from quadest.simulation.aiding import measure_aiding, sensor_context, validate_aiding
-from quadest.simulation.imu import interval_means, measure_mimu, read_recorded_imu
+from quadest.simulation.imu import interval_means, measure_mimu, read_recorded_imu, recorded_imu_data
 from quadest.simulation.quadrotor_data import fly_scenario
-from quadest.simulation.recorded import IMU_STEP_RTOL, recorded_data, resolve_recording
+from quadest.simulation.recorded import resolve_recording
 from quadest.simulation.spec import ModelSpec
 
 
@@ -123,18 +123,29 @@ def build_ins_data(settings: DataSettings) -> MonteCarloData:
     assumed = (imu.gyro_errors, imu.accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
     Q = process_noise(imu.gyro, imu.accel, mcfg.ins_process_noise, T)
     model = InsFilterModel(
-        T, float(mcfg.gravity), Q, aiding, *assumed, chart=mcfg.attitude_chart, batch_size=runs,
+        T,
+        float(mcfg.gravity),
+        Q,
+        aiding,
+        *assumed,
+        chart=mcfg.attitude_chart,
+        batch_size=runs,
         platform_input=platform is not None,
-    )  # fmt: skip
+    )
     inputs = [imu.z_gyro, imu.z_acc] + ([] if platform is None else [np.broadcast_to(platform, imu.z_gyro.shape)])
 
     P0 = _initial_covariance(settings)
     offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 15)), P0, streams["initial"])
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
-        "model": mcfg.name, "calibrated": bool(mcfg.calibrated), "sensor": scfg.name, "error_scale": scale,
-        "scenario": flown.name, "attitude_chart": mcfg.attitude_chart, "aiding": "+".join(mcfg.aiding),
-    }  # fmt: skip
+        "model": mcfg.name,
+        "calibrated": bool(mcfg.calibrated),
+        "sensor": scfg.name,
+        "error_scale": scale,
+        "scenario": flown.name,
+        "attitude_chart": mcfg.attitude_chart,
+        "aiding": "+".join(mcfg.aiding),
+    }
     K1 = truth.time.size
     return MonteCarloData(
         model=model,
@@ -177,15 +188,15 @@ def build_recorded_ins_data(settings: DataSettings) -> MonteCarloData:
     gyro, accel = triad_spec(scfg.gyro, scale), triad_spec(scfg.accel, scale)
     Q = process_noise(gyro, accel, mcfg.ins_process_noise, T)
     model = InsFilterModel(T, float(mcfg.gravity), Q, aiding, chart=mcfg.attitude_chart, batch_size=runs)
-    P0 = _initial_covariance(settings)
-    offsets = draw_initial_estimates(np.zeros((runs, 15)), P0, streams["initial"])
-    x0 = model.boxplus(truth[:, 0], offsets)
     labels = {
-        "model": mcfg.name, "recording": str(mcfg.recording), "sensor": scfg.name,
-        "attitude_chart": mcfg.attitude_chart, "aiding": "+".join(mcfg.aiding), **recordings[0].notes,
-    }  # fmt: skip
-    return recorded_data(settings, model, recordings, x0, P0, starts_at_first_sample=True, step_rtol=IMU_STEP_RTOL,
-                         sensors=records, labels=labels)  # fmt: skip
+        "model": mcfg.name,
+        "recording": str(mcfg.recording),
+        "sensor": scfg.name,
+        "attitude_chart": mcfg.attitude_chart,
+        "aiding": "+".join(mcfg.aiding),
+        **recordings[0].notes,
+    }
+    return recorded_imu_data(settings, model, recordings, _initial_covariance(settings), streams, records, labels)
 
 
 MODEL = ModelSpec(  # n_err = 15
