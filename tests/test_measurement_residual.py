@@ -95,6 +95,7 @@ def test_the_cases_cover_every_gaussian_kind():
     assert {"ekf", "ukf", "mekf", "hf", "srukf", "ckf", "cdkf", "dd1", "ghkf", "iekf", "iplf"} <= set(GAUSSIAN_KINDS)
 
 
+@pytest.mark.slow  # its cases together: about 2 s
 @pytest.mark.parametrize("kind, params", CASES, ids=IDS)
 def test_a_wrapped_bearing_residual_keeps_every_gaussian_filter_on_the_truth(kind, params, monkeypatch):
     """After 40 bearings of σ = 0.02 rad the direction is known to about σ/√40 ≈ 3.2e-3 rad (the
