@@ -28,7 +28,7 @@ from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.base import FilterModel
 from quadest.numerics import quaternion as quat
 from quadest.runner import run_estimator
-from quadest.sensors.magnetometer import measure_magnetometer, sample_stride
+from quadest.sensors.magnetometer import measure_magnetometer
 from quadest.sensors.mimu import TriadSpec, draw_triad_errors
 from quadest.simulation.registry import build_data
 
@@ -311,7 +311,7 @@ def test_magnetometer_samples_the_body_field_at_its_rate():
     body = Rotation.from_quat(q[:, record.available][..., [1, 2, 3, 0]].reshape(-1, 4)).inv().apply(M_EARTH)
     assert np.allclose(record.values[:, record.available].reshape(-1, 3), body, atol=1e-12)
     with pytest.raises(ConfigError, match=r"model\.magnetometer\.rate"):
-        sample_stride(30.0, T)
+        measure_magnetometer(spec, errors, q, M_EARTH, T, 30.0, [np.random.default_rng(i) for i in range(2)])
 
 
 @pytest.mark.parametrize("model", ["attitude", "ins"])

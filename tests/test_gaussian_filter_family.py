@@ -77,8 +77,12 @@ def test_iplf_is_the_kalman_filter_on_a_linear_model_with_any_rule(params, itera
 
 def test_rule_names_are_the_rules_the_iplf_builds():
     assert {integration_rule(name).name for name in RULES} == {
-        "gauss_hermite", "unscented", "cubature3", "cubature5", "central_difference"
-    }  # fmt: skip
+        "gauss_hermite",
+        "unscented",
+        "cubature3",
+        "cubature5",
+        "central_difference",
+    }
 
 
 def _pendulum_problem(runs=3, steps=150, seed=4):

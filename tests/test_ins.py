@@ -102,8 +102,9 @@ def test_barometer_error_classes():
     walk = measure_barometer(spec, z, T, _rngs(4, B)).values[..., 0] - z
     assert _variance_ok(walk[:, 0], 0.25)  # turn-on bias, across runs
     assert _variance_ok(walk[:, 100] - walk[:, 0], 0.2**2 * 1.0)  # random walk after 1 s
-    scale = measure_barometer(BarometerSpec(rate=100.0, white_noise=1e-9, bias_random_walk=0.0, scale_factor=0.05),
-                              z, T, _rngs(5, B)).values[..., 0]  # fmt: skip
+    scale = measure_barometer(
+        BarometerSpec(rate=100.0, white_noise=1e-9, bias_random_walk=0.0, scale_factor=0.05), z, T, _rngs(5, B)
+    ).values[..., 0]
     assert _variance_ok(scale[:, -1] / 2.0 - 1.0, 0.05**2)
 
 
@@ -187,10 +188,11 @@ def test_camera_projection_by_hand():
 def _random_ins_model(chart: str = "rotation_vector", B: int = 3):
     rng = np.random.default_rng(11)
     errors = [
-        TriadErrors(np.eye(3) + 0.02 * rng.standard_normal((B, 3, 3)), 0.01 * rng.standard_normal((B, 3)),
-                    np.zeros((B, 3)))
+        TriadErrors(
+            np.eye(3) + 0.02 * rng.standard_normal((B, 3, 3)), 0.01 * rng.standard_normal((B, 3)), np.zeros((B, 3))
+        )
         for _ in range(3)
-    ]  # fmt: skip
+    ]
     vision, layout = VisionSpec(), ins_layout()
     aiding = {
         "gps": GpsAiding(GPSSpec(latency=0.1), 0.1, np.eye(6), layout),
@@ -200,9 +202,15 @@ def _random_ins_model(chart: str = "rotation_vector", B: int = 3):
     }
     model = InsFilterModel(T, 9.81, np.eye(15), aiding, errors[0], errors[1], chart=chart, batch_size=B)
     x = np.concatenate(
-        [quat.from_euler(rng.uniform(-0.5, 0.5, (B, 3))), rng.uniform(-2, 2, (B, 3)), rng.normal(0, 1, (B, 3)),
-         0.05 * rng.standard_normal((B, 3)), 0.3 * rng.standard_normal((B, 3))], axis=-1,
-    )  # fmt: skip
+        [
+            quat.from_euler(rng.uniform(-0.5, 0.5, (B, 3))),
+            rng.uniform(-2, 2, (B, 3)),
+            rng.normal(0, 1, (B, 3)),
+            0.05 * rng.standard_normal((B, 3)),
+            0.3 * rng.standard_normal((B, 3)),
+        ],
+        axis=-1,
+    )
     u = np.concatenate([rng.normal(0, 2.0, (B, 3)), rng.normal(0, 3.0, (B, 3)) + [0, 0, 9.81]], axis=-1)
     return model, x, u
 

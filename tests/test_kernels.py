@@ -302,8 +302,11 @@ def measured_tolerance(reference, args: tuple, perturb: tuple[int, ...], outputs
     rng = np.random.default_rng(99)
     base = reference(*args)
     moves = [reference(*(rounded(rng, a) if i in perturb else a for i, a in enumerate(args))) for _ in range(3)]
-    return [10.0 * np.max([per_run_error(moved[k], base[k]) for moved in moves], axis=0)
-            + 64 * EPS * np.abs(base[k]).reshape(len(base[k]), -1).max(1) for k in outputs]  # fmt: skip
+    return [
+        10.0 * np.max([per_run_error(moved[k], base[k]) for moved in moves], axis=0)
+        + 64 * EPS * np.abs(base[k]).reshape(len(base[k]), -1).max(1)
+        for k in outputs
+    ]
 
 
 def test_unscented_points_kernel_is_the_reference_bit_for_bit():

@@ -72,8 +72,22 @@ def test_fast_step_kernels_give_the_reference_numbers_to_round_off(
     active = np.ones(B, dtype=bool)
     active[2] = False  # a failed run is never resampled
     log_floor = np.log(1e-2) if floor else np.log(1e-99)
-    args = (x, hx, z, whitening, log_norm, log_w, uniforms, scheme, every_step, 0.5, active,
-            estimate_resampled, log_floor, floor)  # fmt: skip
+    args = (
+        x,
+        hx,
+        z,
+        whitening,
+        log_norm,
+        log_w,
+        uniforms,
+        scheme,
+        every_step,
+        0.5,
+        active,
+        estimate_resampled,
+        log_floor,
+        floor,
+    )
     fast, ref = fast_bootstrap_step(*args), fast_bootstrap_step_reference(*args)
     assert ref.vanished[0] != floor and not ref.vanished[1:].any()  # the floor keeps run 0's weights
     assert not ref.resampled[2] and ref.resampled[3:].any()

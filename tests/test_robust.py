@@ -37,8 +37,17 @@ from quadest.sensors.noise_laws import NoiseLaw, draw_noise
 from quadest.simulation.quadrotor_data import build_quadrotor_data
 
 INF = 1e12  # γ beyond any whitened residual
-FAMILY = {"ckf": CKF, "srckf": SRCKF, "ckf5": CKF5, "srckf5": SRCKF5, "cdkf": CDKF, "srcdkf": SRCDKF, "dd1": DD1,
-          "ghkf": GHKF, "srukf": SRUKF}  # fmt: skip
+FAMILY = {
+    "ckf": CKF,
+    "srckf": SRCKF,
+    "ckf5": CKF5,
+    "srckf5": SRCKF5,
+    "cdkf": CDKF,
+    "srcdkf": SRCDKF,
+    "dd1": DD1,
+    "ghkf": GHKF,
+    "srukf": SRUKF,
+}
 PAIRS = {  # Huber filter and its parent
     "huber_ckf": (lambda m: HuberCKF(m, huber_threshold=INF), CKF),
     "hhcf": (lambda m: HHCF(m, huber_threshold=INF), CKF5),

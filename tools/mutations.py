@@ -1116,7 +1116,7 @@ MUTATIONS += (  # EuRoC-layout folders and the trajectory errors (docs/models.md
     ),
     Mutation(
         "a recording on model=ins starts one period before its first sample",
-        "src/quadest/simulation/ins_data.py",
+        "src/quadest/simulation/imu.py",
         "starts_at_first_sample=True",
         "starts_at_first_sample=False",
         (EUROC + "test_a_recording_is_cut_to_duration_and_starts_at_its_first_sample",),
@@ -1131,8 +1131,8 @@ MUTATIONS += (  # EuRoC-layout folders and the trajectory errors (docs/models.md
     Mutation(
         "the attitude model on a recording with gravity along +z",
         "src/quadest/simulation/attitude_data.py",
-        "T, np.array([0.0, 0.0, -float(mcfg.gravity)]), magnetometer.mag_earth,",
-        "T, np.array([0.0, 0.0, float(mcfg.gravity)]), magnetometer.mag_earth,",
+        "np.array([0.0, 0.0, -float(mcfg.gravity)]),",
+        "np.array([0.0, 0.0, float(mcfg.gravity)]),",
         (EUROC + "test_the_attitude_model_reads_the_folder_and_predicts_its_accelerometer",),
     ),
     Mutation(
@@ -1658,6 +1658,74 @@ MUTATIONS += (  # the ledger's narrow windows and a model's own job defaults
         ("tests/test_model_job_defaults.py::test_a_bad_job_default_makes_the_spec_unusable",),
     ),
 )  # fmt: skip
+
+RESIDUAL = "tests/test_measurement_residual.py::"
+WRAPPED = RESIDUAL + "test_a_wrapped_bearing_residual_keeps_every_gaussian_filter_on_the_truth"
+STRADDLING = RESIDUAL + "test_sigma_points_on_both_sides_of_the_cut_average_to_the_right_bearing"
+
+MUTATIONS += (  # every Gaussian filter conditions on the measurement's residual (a bearing across ±π)
+    Mutation(
+        "the sigma-point family's innovation by z − ẑ, not the measurement's residual",
+        "src/quadest/estimators/sigma_point.py",
+        "(z - y_pred if residual is None else residual(z, y_pred)), Sy",
+        "z - y_pred, Sy",
+        (WRAPPED + "[ckf]",),
+    ),
+    Mutation(
+        "the sigma-point family averages a wrapped measurement's points arithmetically",
+        "src/quadest/estimators/sigma_point.py",
+        "y_pred, DY = point_mean(Y, self.rule.mean_weights(dim), np.add, residual)",
+        "y_pred, DY = self._mean(Y, dim, state=False)",
+        (STRADDLING + "[ckf]",),
+    ),
+    Mutation(
+        "the batched EKFs (mekf, hf) take z − ẑ for the innovation",
+        "src/quadest/estimators/error_state_ekf.py",
+        "self._nu = meas.innovation(z, moments.mean)",
+        "self._nu = z - moments.mean",
+        (WRAPPED + "[mekf]", WRAPPED + "[hf]"),
+    ),
+    Mutation(
+        "the fused SR-UKF update taken for a measurement with its own residual",
+        "src/quadest/estimators/srukf.py",
+        " or self.model.measurement().residual is not None:",
+        ":",
+        (WRAPPED + "[srukf]",),
+    ),
+    Mutation(
+        "filterpy's EKF handed no residual",
+        "src/quadest/estimators/filterpy_ekf.py",
+        "residual=np.subtract if meas.residual is None else _column_residual(meas.residual),",
+        "residual=np.subtract,",
+        (WRAPPED + "[ekf]",),
+    ),
+    Mutation(
+        "filterpy's UKF averages a wrapped measurement's points arithmetically",
+        "src/quadest/estimators/filterpy_ukf.py",
+        "self.kf.residual_z, self.kf.z_mean = residual, _residual_mean(residual)",
+        "self.kf.residual_z, self.kf.z_mean = residual, None",
+        (STRADDLING + "[ukf-alpha=1.0-beta=0.0-kappa=1.0]",),
+    ),
+)
+
+RATES = "tests/test_sensor_rates.py::"
+
+MUTATIONS += (  # a bad sensor rate: one line naming the sensor's own key and the allowed rates
+    Mutation(
+        "a sensor's sampling names the magnetometer's key for its bad rate",
+        "src/quadest/sensors/gps.py",
+        'sample_stride(spec.rate, sample_period, f"{Gps.key()}.rate")',
+        'sample_stride(spec.rate, sample_period, "model.magnetometer.rate")',
+        (RATES + "test_the_sampling_itself_names_the_sensors_own_key[gps]",),
+    ),
+    Mutation(
+        "a bad rate's error gives the rule but not the allowed rates",
+        "src/quadest/sensors/base.py",
+        "raise ConfigError(key, rate, allowed_rates(sample_period))",
+        'raise ConfigError(key, rate, f"must divide the filter rate 1/sample_period = {1.0 / sample_period:g} Hz")',
+        (RATES + "test_a_bad_rate_is_refused_naming_the_sensors_own_key_and_the_allowed_rates[30.0-gps]",),
+    ),
+)
 
 
 def tree_files() -> list[str]:

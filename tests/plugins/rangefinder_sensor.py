@@ -66,7 +66,7 @@ class Rangefinder(Sensor):
         values = np.empty((*height.shape, 1))
         for i, rng in enumerate(streams["rangefinder"]):  # one generator per run, its own stream
             values[i, :, 0] = height[i] + draw_noise(s.noise_law, rng, height.shape[1:], s.noise)
-        available = available_samples(s.rate, self.context.sample_period, height.shape[1])
+        available = available_samples(s.rate, self.context.sample_period, height.shape[1], f"{self.key()}.rate")
         available &= (height <= s.max_range).all(axis=0)
         values[:, ~available] = np.nan
         return SensorRecord(values, available)

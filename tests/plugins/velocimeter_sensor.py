@@ -50,7 +50,7 @@ class Velocimeter(Sensor):
     def simulate(self, truth: TrueMotion, streams: Mapping[str, list[np.random.Generator]]) -> SensorRecord:
         v, s = truth.velocity, self.settings
         values = v + s.noise * np.stack([rng.standard_normal(v.shape[1:]) for rng in streams["velocimeter"]])
-        available = available_samples(s.rate, self.context.sample_period, v.shape[1])
+        available = available_samples(s.rate, self.context.sample_period, v.shape[1], f"{self.key()}.rate")
         values[:, ~available] = np.nan
         return SensorRecord(values, available)
 

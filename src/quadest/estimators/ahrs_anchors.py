@@ -223,9 +223,13 @@ class AhrsEKF(_AhrsAnchor):
     def _make(self):
         var_gyr, var_acc, var_mag = self.noises
         return self._filters.EKF(
-            Dt=self.model.dt, frame="NED", magnetic_ref=np.array(self.model.mag_earth, dtype=float),
-            var_gyr=var_gyr, var_acc=var_acc, var_mag=var_mag,
-        )  # fmt: skip
+            Dt=self.model.dt,
+            frame="NED",
+            magnetic_ref=np.array(self.model.mag_earth, dtype=float),
+            var_gyr=var_gyr,
+            var_acc=var_acc,
+            var_mag=var_mag,
+        )
 
     def _step(self, q, acc, mag):
         self.filter.mag = mag  # ahrs' EKF sizes its measurement by this attribute, not by the argument

@@ -41,10 +41,7 @@ from quadest.estimators.gaussian_steps import (
 from quadest.estimators.smoothing import SmoothingForm, linearized_smoother_step
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, psd_sqrt
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
+from quadest.numerics import matrix_transpose as _t
 
 
 @dataclass
@@ -109,11 +106,11 @@ class BatchedEKFBase(Estimator):
         self, z: np.ndarray, u: np.ndarray, sensor: str | None
     ) -> tuple[np.ndarray, np.ndarray, MeasurementMoments]:
         """``H = model.H_err`` at the prior mean and the measurement's moments; stores the
-        innovation. Returns ``(H, R, moments)``."""
+        innovation, the measurement's residual ``r(z, h(x̂⁻))``. Returns ``(H, R, moments)``."""
         meas = self.model.measurement(sensor)
         H = self.model.H_err(self.x, u, sensor)
         moments = linearized_moments(meas.h(self.x[:, None, :], u)[:, 0], H, self.P, meas.R)
-        self._nu = z - moments.mean
+        self._nu = meas.innovation(z, moments.mean)
         return H, meas.R, moments
 
     @property

@@ -21,11 +21,8 @@ from quadest.estimators.error_state_ekf import BatchedEKFBase
 from quadest.estimators.gaussian_steps import joseph_covariance, kalman_correction
 from quadest.estimators.robust_params import DEFAULT, HuberParams, huber_settings
 from quadest.models.base import FilterModel
+from quadest.numerics import matrix_transpose as _t
 from quadest.numerics.huber import HuberCounts
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
 
 
 @dataclass

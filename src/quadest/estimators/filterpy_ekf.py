@@ -27,6 +27,7 @@ correction is injected with ``⊞`` and, as the filter, without a reset Jacobian
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -53,6 +54,11 @@ class _LinearisedEKF(ExtendedKalmanFilter):
 
     def predict_x(self, u=0) -> None:
         self.x = self.predicted
+
+
+def _column_residual(residual: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> Callable:
+    """A measurement's ``residual`` of (..., m) rows as filterpy calls it, on (m, 1) columns."""
+    return lambda z, hx: residual(z[:, 0], hx[:, 0])[:, None]
 
 
 class FilterpyEKF(SingleRunEstimator):
@@ -108,12 +114,15 @@ class FilterpyEKF(SingleRunEstimator):
         self.update_linearised(z, self.model.H_err(x, u, sensor)[0], h, sensor)
 
     def update_linearised(self, z: np.ndarray, H: np.ndarray, hx: np.ndarray, sensor: str | None = None) -> None:
-        """Measurement update given ``H`` (m, n_err) and ``h`` (m,) evaluated at the current mean."""
+        """Measurement update given ``H`` (m, n_err) and ``h`` (m,) evaluated at the current mean;
+        the innovation is the measurement's residual (filterpy's ``residual`` argument)."""
+        meas = self.model.measurement(sensor)
         self.kf.update(
             np.asarray(z, dtype=float).reshape(-1, 1),
             HJacobian=lambda _: H,
             Hx=lambda _: hx.reshape(-1, 1),
-            R=self.model.measurement(sensor).R,
+            R=meas.R,
+            residual=np.subtract if meas.residual is None else _column_residual(meas.residual),
         )
         if self.local is not None:
             self.kf.x = self.local.inject(self.kf.x[:, 0])[:, None]

@@ -93,6 +93,12 @@ class _PointBatchedUKF(UnscentedKalmanFilter):
         super().update(z, R=R, UT=UT, hx=lambda x, u: next(rows), **hx_args)
 
 
+def _residual_mean(residual: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> Callable:
+    """filterpy's ``z_mean`` (sigma points (P, m), weights (P,)) for a measurement residual ``r``:
+    ``Y_0 + Σ wm_i r(Y_i, Y_0)``."""
+    return lambda Y, wm: Y[0] + wm[1:] @ residual(Y[1:], Y[0])
+
+
 class FilterpyUKF(SingleRunEstimator):
     """filterpy's UKF on one run of a :class:`FilterModel`."""
 
@@ -184,12 +190,24 @@ class FilterpyUKF(SingleRunEstimator):
             return SmoothingForm()
         return SmoothingForm(boxplus=self.model.boxplus, boxminus=self.model.boxminus)
 
+    def _use_residual(self, sensor: str | None) -> None:
+        """filterpy's ``residual_z`` and ``z_mean`` for this measurement: ``np.subtract`` and the
+        weighted sum, or the measurement's residual ``r`` and the mean ``Y_0 + Σ wm_i r(Y_i, Y_0)``
+        (points on both sides of a wrap average to the right angle)."""
+        residual = self.model.measurement(sensor).residual
+        if residual is None:
+            self.kf.residual_z, self.kf.z_mean = np.subtract, None
+        else:
+            self.kf.residual_z, self.kf.z_mean = residual, _residual_mean(residual)
+
     def update_evaluated(self, z: np.ndarray, h_values: np.ndarray, u: np.ndarray) -> None:
         """Primary update of a vector state given ``h`` at the prior sigma points ``kf.sigmas_f``."""
+        self._use_residual(None)
         self.kf.update(z, u=u, h_values=h_values)
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
-        """Update with the primary measurement or a named sensor (its ``h`` and ``R``)."""
+        """Update with the primary measurement or a named sensor (its ``h``, ``R`` and residual)."""
+        self._use_residual(sensor)
         if sensor is None:
             self.kf.update(z, u=u)
         else:

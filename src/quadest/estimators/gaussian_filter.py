@@ -38,10 +38,7 @@ from quadest.estimators.iterated_smoothing import Step, Update, iterated_smoothe
 from quadest.estimators.smoothing import SmootherStep, SmoothingForm
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, kalman_gain, psd_sqrt
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
+from quadest.numerics import matrix_transpose as _t
 
 
 @dataclass

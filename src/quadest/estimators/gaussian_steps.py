@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadest.numerics import kalman_gain
+from quadest.numerics import matrix_transpose as _t
 from quadest.numerics.huber import HuberSettings, HuberStep, huber_update
 from quadest.numerics.joseph import joseph_covariance
 from quadest.numerics.rules import IntegrationRule, rule_mean
@@ -55,10 +56,6 @@ __all__ = [
 ]
 
 Manifold = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
 
 
 def symmetric(P: np.ndarray) -> np.ndarray:

@@ -42,13 +42,10 @@ import numpy as np
 from quadest.estimators.gaussian_steps import point_mean, sigma_points, symmetric
 from quadest.models.base import FilterModel
 from quadest.numerics import kalman_gain
+from quadest.numerics import matrix_transpose as _t
 from quadest.numerics.rules import IntegrationRule
 
 Factor = Callable[[np.ndarray, str], np.ndarray]
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
 
 
 @dataclass(frozen=True)

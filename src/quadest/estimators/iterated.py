@@ -76,8 +76,9 @@ class IPLFParams:
         return []
 
 
-def integration_rule(rule: str, p: int = 3, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0,
-                     h: float = 3.0**0.5) -> IntegrationRule:  # fmt: skip
+def integration_rule(
+    rule: str, p: int = 3, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0, h: float = 3.0**0.5
+) -> IntegrationRule:
     """The sigma-point rule named ``rule`` (one of :data:`RULES`) with its parameters."""
     if rule == "gauss_hermite":
         return GaussHermiteRule(int(p))
@@ -108,9 +109,18 @@ class IPLF(GaussianFilter):
     config_name = "iplf"
     Params = IPLFParams
 
-    def __init__(self, model: FilterModel, rule: str = "cubature", p: int = 3, alpha: float = 1.0,
-                 beta: float = 0.0, kappa: float = 0.0, h: float = 3.0**0.5, iterations: int = 10,
-                 tolerance: float = 0.0) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: FilterModel,
+        rule: str = "cubature",
+        p: int = 3,
+        alpha: float = 1.0,
+        beta: float = 0.0,
+        kappa: float = 0.0,
+        h: float = 3.0**0.5,
+        iterations: int = 10,
+        tolerance: float = 0.0,
+    ) -> None:
         linearisation = StatisticalLinearRegression(integration_rule(rule, p, alpha, beta, kappa, h))
         linearisation.rule.validate(model.n_err)
         super().__init__(model, Integration(linearisation, iterations, tolerance))

@@ -29,10 +29,7 @@ from quadest.estimators.gaussian_steps import symmetric
 from quadest.estimators.integrations import Linearisation
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, kalman_gain
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
+from quadest.numerics import matrix_transpose as _t
 
 
 @dataclass(frozen=True)

@@ -107,9 +107,11 @@ def unscented_constraints(values: Mapping[str, Any], n: int) -> list[tuple[str, 
         return []
     if not n + kappa > 0:
         return [("kappa", kappa, f"n + lambda = alpha^2 (n + kappa) must be > 0, so kappa > {-n} for n={n}")]
-    return [("alpha", alpha, f"too small: n + lambda = alpha^2 (n + kappa) computes to {n + lam:g} in floating "
-             f"point for n={n}, kappa={kappa:g} (alpha^2 (n + kappa) is lost next to n); alpha >= "
-             f"{smallest_alpha(n, kappa):.2g} works")]  # fmt: skip
+    lost = (
+        f"too small: n + lambda = alpha^2 (n + kappa) computes to {n + lam:g} in floating point for n={n}, "
+        f"kappa={kappa:g} (alpha^2 (n + kappa) is lost next to n); alpha >= {smallest_alpha(n, kappa):.2g} works"
+    )
+    return [("alpha", alpha, lost)]
 
 
 def smallest_alpha(n: int, kappa: float) -> float:

@@ -285,9 +285,12 @@ class ParticleFilter(Estimator):
         with np.errstate(invalid="ignore", divide="ignore"):
             ess_mean = self.ess_sum / self.step
         return {
-            "ess_mean": ess_mean, "resample_count": self.resample_count, "outside_support": self.outside_support,
-            "floored_steps": self.floored_steps, "vanished_steps": self.vanished_steps,
-        }  # fmt: skip
+            "ess_mean": ess_mean,
+            "resample_count": self.resample_count,
+            "outside_support": self.outside_support,
+            "floored_steps": self.floored_steps,
+            "vanished_steps": self.vanished_steps,
+        }
 
     def initial_particle_state(self, x0: np.ndarray, P0: np.ndarray) -> dict[str, np.ndarray]:
         """The per-particle arrays (B, N, ...) a proposal carries besides the particles, at the start
@@ -473,10 +476,21 @@ class BootstrapPF(ParticleFilter):
             hx = self.model.h(x_new, u)
         uniforms = draw_step_uniforms(self.resampling, self.rngs, self.N)
         out = fast_bootstrap_step(
-            x_new, hx, z, self._whitening, self._log_norm, self.logw, uniforms, self.resampling,
-            self.schedule == "every_step", self.ess_threshold, ~self.failed, self.estimate == "resampled",
-            self.log_floor, self.weights == "linear_floor",
-        )  # fmt: skip
+            x_new,
+            hx,
+            z,
+            self._whitening,
+            self._log_norm,
+            self.logw,
+            uniforms,
+            self.resampling,
+            self.schedule == "every_step",
+            self.ess_threshold,
+            ~self.failed,
+            self.estimate == "resampled",
+            self.log_floor,
+            self.weights == "linear_floor",
+        )
         self.x, self.ess, self._mean, self._cov = out.x, out.ess, out.mean, out.cov
         self.floored_steps += out.floored
         self.vanished_steps += out.vanished

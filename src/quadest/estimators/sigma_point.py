@@ -47,12 +47,9 @@ from quadest.estimators.gaussian_steps import (
 from quadest.estimators.smoothing import SmootherStep, SmoothingForm, sigma_point_smoother_gain
 from quadest.models.base import FilterModel
 from quadest.numerics import batched_cholesky, cholupdate, psd_sqrt, qr_factor
+from quadest.numerics import matrix_transpose as _t
 from quadest.numerics.huber import HuberCounts, HuberSettings
 from quadest.numerics.rules import IntegrationRule
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
 
 
 def _block_diagonal(blocks: list[np.ndarray]) -> np.ndarray:
@@ -199,18 +196,24 @@ class SigmaPointFilter(Estimator):
         )
 
     def _sensor(self, sensor: str | None):
-        """``(h, sqrt_R, h_noise)`` of the primary measurement or of ``model.sensors[sensor]``."""
+        """``(h, sqrt_R, h_noise, residual)`` of the primary measurement or of
+        ``model.sensors[sensor]``; ``residual`` is ``None`` for plain subtraction."""
+        meas = self.model.measurement(sensor)
         if sensor is None:
-            return self.model.h, self.sqrt_R, self.model.h_noise
+            return self.model.h, self.sqrt_R, self.model.h_noise, meas.residual
         if sensor not in self._sensor_cache:
-            self._sensor_cache[sensor] = psd_sqrt(self.model.measurement(sensor).R, f"R of sensor '{sensor}'")
-        h = self.model.measurement(sensor).h
-        return h, self._sensor_cache[sensor], lambda x, v, u: h(x, u) + v
+            self._sensor_cache[sensor] = psd_sqrt(meas.R, f"R of sensor '{sensor}'")
+        h = meas.h
+        return h, self._sensor_cache[sensor], lambda x, v, u: h(x, u) + v, meas.residual
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
-        """Measurement update (eqs 5.20–5.29), with the primary measurement or a named sensor."""
+        """Measurement update (eqs 5.20–5.29), with the primary measurement or a named sensor. A
+        measurement with its own ``residual`` ``r`` (a bearing) takes it as the ⊟ of its space:
+        ``ȳ = Y_0 + Σ wm_i r(Y_i, Y_0)``, deviations ``r(Y_i, ȳ)`` and ``ν = r(z, ȳ)``, so points on
+        both sides of a wrap average to the right angle (as
+        :class:`~quadest.estimators.integrations.StatisticalLinearRegression`)."""
         ns = self.model.n
-        h, sqrt_R, h_noise = self._sensor(sensor)
+        h, sqrt_R, h_noise, residual = self._sensor(sensor)
         if self.augmented:
             if self._carried is None or sensor is not None:
                 X = self._points([sqrt_R])
@@ -223,12 +226,15 @@ class SigmaPointFilter(Estimator):
             X = self._points([])  # (5.20) redraw
             Y = h(X, u)  # (5.21)
             dim = self.model.n_err
-        y_pred, DY = self._mean(Y, dim, state=False)  # (5.22)
+        if residual is None:
+            y_pred, DY = self._mean(Y, dim, state=False)  # (5.22)
+        else:
+            y_pred, DY = point_mean(Y, self.rule.mean_weights(dim), np.add, residual)
         spread_y = self._spread(DY, dim, sqrt_R)  # (5.23)–(5.24)
         Sy = self._innovation_factor(spread_y)
         DX = self.model.boxminus(X, self.x[:, None, :])
         Pxy = self.rule.cross_covariance(DX, DY, dim)  # (5.25)
-        self._nu, self._Sy = z - y_pred, Sy
+        self._nu, self._Sy = (z - y_pred if residual is None else residual(z, y_pred)), Sy
         self._measurement_update(Pxy, spread_y, DX, DY, dim, sqrt_R)
         self.quarantine(self.x, self._spread_state(), self._x_safe, self._spread_safe)
 

@@ -40,13 +40,10 @@ import numpy as np
 
 from quadest.estimators.gaussian_steps import joseph_covariance, symmetric
 from quadest.numerics import kalman_gain, qr_factor
+from quadest.numerics import matrix_transpose as _t
 from quadest.numerics.rules import IntegrationRule
 
 Manifold = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
 
 
 @dataclass(frozen=True)

@@ -9,11 +9,12 @@ W0 downdate (eqs 5.19, 5.24) is the unscented rule's (:class:`~quadest.numerics.
 2007; :mod:`quadest.numerics.huber`).
 
 On the compiled backend (``QUADEST_KERNELS=numba``) the plain SR-UKF (not augmented, not robust,
-the primary measurement) of a model that declares ``fused_unscented`` (compiled ``f``/``h`` for
-sigma points, like the thesis quadrotor) and a vector state takes each step in three fused calls per stage
-(:mod:`quadest.numerics.unscented`: points, moments, correction) around the model's ``f`` and
-``h``. Every other case, and the ``numpy`` backend, takes the sigma-point family's path
-(:class:`~quadest.estimators.sigma_point.SquareRootSigmaPointFilter`), bit for bit; the fused path
+the primary measurement with the residual ``z − ẑ``) of a model that declares ``fused_unscented``
+(compiled ``f``/``h`` for sigma points, like the thesis quadrotor) and a vector state takes each
+step in three fused calls per stage (:mod:`quadest.numerics.unscented`: points, moments,
+correction) around the model's ``f`` and ``h``. Every other case, and the ``numpy`` backend, takes
+the sigma-point family's path (:class:`~quadest.estimators.sigma_point.SquareRootSigmaPointFilter`),
+bit for bit; the fused path
 agrees with it to round-off (tests/test_srukf_identities.py), as the compiled ``f``/``h`` agree
 with their numpy references.
 """
@@ -105,8 +106,9 @@ class SRUKF(SquareRootSigmaPointFilter):
 
     def update(self, z: np.ndarray, u: np.ndarray, sensor: str | None = None) -> None:
         """Measurement update (eqs 5.20–5.29), fused on the compiled backend for the primary
-        measurement."""
-        if sensor is not None or not self._fused():
+        measurement when its residual is ``z − ẑ`` (the kernel's); a measurement with its own
+        residual takes the sigma-point family's path."""
+        if sensor is not None or not self._fused() or self.model.measurement().residual is not None:
             super().update(z, u, sensor)
             return
         ut = self.rule.ut(self.model.n)

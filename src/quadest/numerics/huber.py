@@ -28,10 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadest.numerics.square_root import batched_cholesky, qr_factor
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
+from quadest.numerics.transpose import matrix_transpose as _t
 
 
 @dataclass(frozen=True)

@@ -177,8 +177,9 @@ def gather_kernel(particles: np.ndarray, runs: np.ndarray, indices: np.ndarray, 
 
 
 @njit(**_JIT)
-def gaussian_logpdf_diagonal_kernel(e: np.ndarray, inverse_scale: np.ndarray, constant: float, log_det: float,
-                                    out: np.ndarray) -> None:  # fmt: skip
+def gaussian_logpdf_diagonal_kernel(
+    e: np.ndarray, inverse_scale: np.ndarray, constant: float, log_det: float, out: np.ndarray
+) -> None:
     """``out[k] = −0.5 (Σ_j (e[k, j] · inverse_scale[j])² + constant) − log_det`` for ``e`` (K, r):
     ``log N(e; 0, diag(scale²))`` with ``constant = r log 2π`` and ``log_det = Σ log scale``, the
     operations of :func:`quadest.models.base._gaussian_logpdf`'s diagonal branch, the sum over
@@ -201,8 +202,9 @@ def gaussian_logpdf_diagonal_kernel(e: np.ndarray, inverse_scale: np.ndarray, co
 
 
 @njit(**_JIT)
-def shift_log_weights_kernel(log_weights: np.ndarray, increments: np.ndarray, out: np.ndarray,
-                             vanished: np.ndarray) -> None:  # fmt: skip
+def shift_log_weights_kernel(
+    log_weights: np.ndarray, increments: np.ndarray, out: np.ndarray, vanished: np.ndarray
+) -> None:
     """``out = log_weights + increments − max`` per run (B, N), the maximum over the finite entries,
     non-finite entries −∞; a run with none finite is ``vanished`` and gets zeros (so that ``exp``
     gives it equal weights): the part of
@@ -322,9 +324,17 @@ def _cloud_moments(x: np.ndarray, w: np.ndarray, uniform: bool, mean: np.ndarray
 
 @njit(**_FAST_JIT)
 def fast_log_weights_kernel(
-    hx: np.ndarray, z: np.ndarray, whitening: np.ndarray, log_norm: float, log_weights: np.ndarray,
-    log_floor: float, floor: bool, shifted: np.ndarray, vanished: np.ndarray, floored: np.ndarray,
-) -> None:  # fmt: skip
+    hx: np.ndarray,
+    z: np.ndarray,
+    whitening: np.ndarray,
+    log_norm: float,
+    log_weights: np.ndarray,
+    log_floor: float,
+    floor: bool,
+    shifted: np.ndarray,
+    vanished: np.ndarray,
+    floored: np.ndarray,
+) -> None:
     """The first pass of the fast bootstrap step (``kernel: fast``), per run: the log-likelihood
     ``log_norm − ½‖L⁻¹(z − h(xᵢ))‖²`` (``whitening = L⁻¹`` lower triangular), floored with
     ``floor``, plus ``log_weights``, shifted by its finite maximum into ``shifted`` (non-finite:
@@ -364,10 +374,20 @@ def fast_log_weights_kernel(
 
 @njit(**_FAST_JIT)
 def fast_resample_kernel(
-    x: np.ndarray, w: np.ndarray, uniforms: np.ndarray, scheme: int, every_step: bool, threshold: float,
-    active: np.ndarray, estimate_resampled: bool, x_out: np.ndarray, ess: np.ndarray, resampled: np.ndarray,
-    mean: np.ndarray, cov: np.ndarray,
-) -> None:  # fmt: skip
+    x: np.ndarray,
+    w: np.ndarray,
+    uniforms: np.ndarray,
+    scheme: int,
+    every_step: bool,
+    threshold: float,
+    active: np.ndarray,
+    estimate_resampled: bool,
+    x_out: np.ndarray,
+    ess: np.ndarray,
+    resampled: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+) -> None:
     """The second pass of the fast bootstrap step, per run: the unnormalised weights ``w`` (B, N)
     normalised in place by the product with ``1/Σ``, the ESS, then for the runs due the selection
     ``#{j : c_j ≤ u}`` on the cumulative weights (:func:`_strata`, :func:`_search`), the gather into

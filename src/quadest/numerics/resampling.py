@@ -209,7 +209,11 @@ def resample(
     if kernels is None:
         return resample_from_uniforms(scheme, weights, uniforms)
     out = np.empty(weights.shape, dtype=np.intp)
-    code = {"multinomial": kernels.MULTINOMIAL, "systematic": kernels.SYSTEMATIC, "stratified": kernels.STRATIFIED,
-            "residual": kernels.RESIDUAL}[scheme]  # fmt: skip
+    code = {
+        "multinomial": kernels.MULTINOMIAL,
+        "systematic": kernels.SYSTEMATIC,
+        "stratified": kernels.STRATIFIED,
+        "residual": kernels.RESIDUAL,
+    }[scheme]
     kernels.resample_kernel(code, np.ascontiguousarray(weights), uniforms, out)
     return out

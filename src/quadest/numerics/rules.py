@@ -40,10 +40,7 @@ from functools import cache
 import numpy as np
 
 from quadest.numerics.sigma_points import UTWeights, ut_weights
-
-
-def _t(a: np.ndarray) -> np.ndarray:
-    return np.swapaxes(a, -1, -2)
+from quadest.numerics.transpose import matrix_transpose as _t
 
 
 def rule_mean(Y: np.ndarray, wm: np.ndarray) -> np.ndarray:

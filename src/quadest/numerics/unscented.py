@@ -63,9 +63,16 @@ def unscented_moments(
     mean, S, failed = np.empty((B, m)), np.empty((B, m, m)), np.zeros(B, dtype=bool)
     wc0 = weights.wc[0]
     kernels.unscented_moments_kernel(
-        _c(Y), weights.wm, float(np.sqrt(weights.wc[1])), float(np.sqrt(abs(wc0))), bool(wc0 < 0),
-        _c(sqrt_noise), mean, S, failed,
-    )  # fmt: skip
+        _c(Y),
+        weights.wm,
+        float(np.sqrt(weights.wc[1])),
+        float(np.sqrt(abs(wc0))),
+        bool(wc0 < 0),
+        _c(sqrt_noise),
+        mean,
+        S,
+        failed,
+    )
     return mean, S, failed
 
 

@@ -65,7 +65,7 @@ def measure_barometer(
         increments[0] = 0.0
         noise = draw_noise(spec.noise_law, rng, (K1,), spec.white_noise)
         values[i, :, 0] = (1.0 + scale) * altitude[i] + bias + np.cumsum(increments) + noise
-    available = np.arange(K1) % sample_stride(spec.rate, sample_period) == 0
+    available = np.arange(K1) % sample_stride(spec.rate, sample_period, f"{Barometer.key()}.rate") == 0
     values[:, ~available] = np.nan
     return SensorRecord(values, available)
 

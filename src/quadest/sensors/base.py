@@ -210,30 +210,36 @@ class Sensor(ABC):
         """The filters' model of this sensor on a model whose quantities are at ``layout``."""
 
 
-def sample_stride(rate: float, sample_period: float) -> int:
+def allowed_rates(sample_period: float, shown: int = 5) -> str:
+    """The rates a sensor may have on a filter of step ``sample_period``, as an error's allowed
+    values: the filter rate ``f = 1/sample_period`` divided by a whole number, the first ``shown``
+    of them listed (100, 50, 33.3333, 25, 20, … Hz at f = 100 Hz)."""
+    f = 1.0 / sample_period
+    first = ", ".join(f"{f / k:g}" for k in range(1, shown + 1))
+    return f"one of {first}, … Hz (it must divide the filter rate 1/sample_period = {f:g} Hz: {f:g}/k, k = 1, 2, …)"
+
+
+def sample_stride(rate: float, sample_period: float, key: str) -> int:
     """Filter steps between two samples of a sensor at ``rate`` Hz; the rate must divide the
-    filter rate ``1/sample_period`` and not exceed it."""
+    filter rate ``1/sample_period`` and not exceed it, else a :class:`ConfigError` naming ``key``
+    (the sensor's ``<settings key>.rate``) and :func:`allowed_rates`."""
     ratio = 1.0 / (rate * sample_period)
     stride = round(ratio)
     if stride < 1 or abs(ratio - stride) > 1e-9 * ratio:
-        raise ConfigError(
-            "model.magnetometer.rate", rate, f"must divide the filter rate 1/sample_period = {1.0 / sample_period:g} Hz"
-        )
+        raise ConfigError(key, rate, allowed_rates(sample_period))
     return stride
 
 
 def check_rate(key: str, rate: Any, sample_period: float) -> None:
     """``rate`` (Hz) must be > 0 and divide the filter rate; the error names ``key``."""
     require_positive(key, rate, "must be > 0 Hz")
-    try:
-        sample_stride(float(rate), sample_period)
-    except ConfigError as err:
-        raise ConfigError(key, rate, err.allowed) from None
+    sample_stride(float(rate), sample_period, key)
 
 
-def available_samples(rate: float, sample_period: float, samples: int) -> np.ndarray:
-    """(samples,) bool: a sample every :func:`sample_stride` filter steps, from step 0."""
-    return np.arange(samples) % sample_stride(rate, sample_period) == 0
+def available_samples(rate: float, sample_period: float, samples: int, key: str) -> np.ndarray:
+    """(samples,) bool: a sample every :func:`sample_stride` filter steps, from step 0; a rate
+    that does not divide the filter rate is refused naming ``key``."""
+    return np.arange(samples) % sample_stride(rate, sample_period, key) == 0
 
 
 def sensor_problems(cls: Any) -> list[str]:

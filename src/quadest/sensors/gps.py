@@ -101,7 +101,7 @@ def measure_gps(
         ideal = gps_prediction(p_true[i, source], v_true[i, source], 0.0, spec.measure_velocity)
         values[i] = ideal + white
         values[i, :, :3] += drift
-    available = np.arange(K1) % sample_stride(spec.rate, sample_period) == 0
+    available = np.arange(K1) % sample_stride(spec.rate, sample_period, f"{Gps.key()}.rate") == 0
     values[:, ~available] = np.nan
     return SensorRecord(values, available)
 

@@ -71,7 +71,7 @@ def measure_magnetometer(
 ) -> SensorRecord:
     """Magnetometer samples (B, K+1, 3), NaN between samples, and their availability (K+1,)."""
     B, K1, _ = q_true.shape
-    stride = sample_stride(rate, sample_period)
+    stride = sample_stride(rate, sample_period, f"{Magnetometer.key()}.rate")
     available = np.arange(K1) % stride == 0
     truth = field_in_body(q_true[:, available], mag_earth)
     values = np.full((B, K1, 3), np.nan)
@@ -139,7 +139,7 @@ class Magnetometer(Sensor):
     def noise_covariance(self) -> np.ndarray:
         """``R`` (3, 3) of the filters (class docstring)."""
         mag, T, duration = self.triad, self.context.sample_period, self.context.duration
-        stride = sample_stride(float(self.settings.rate), T)
+        stride = sample_stride(float(self.settings.rate), T, f"{self.key()}.rate")
         r = mag.white_noise_std(stride * T) ** 2 + mag.bias_random_walk**2 * duration / 2.0
         return self.context.noise_inflation * r * np.eye(3)
 

@@ -181,7 +181,7 @@ def measure_vision(
         values[i] = project(r_c, spec.kind, focal, centre) + draw_noise(
             spec.noise_law, rng, (K1, spec.m), spec.noise_std
         )
-    available = (np.arange(K1) % sample_stride(spec.rate, sample_period) == 0) & visible
+    available = (np.arange(K1) % sample_stride(spec.rate, sample_period, f"{Vision.key()}.rate") == 0) & visible
     values[:, ~available] = np.nan
     return SensorRecord(values, available)
 

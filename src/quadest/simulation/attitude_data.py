@@ -2,8 +2,9 @@
 the magnetometer, and bind :class:`~quadest.models.attitude.AttitudeFilterModel` to the runs.
 
 - Truth: :func:`~quadest.simulation.quadrotor_data.fly_scenario` (earth frame z up, ZYX Euler
-  angles in the 16-state truth, columns 6:9); the true biases are each run's turn-on bias plus its
-  random-walk drift (recovered by measuring the same draws once more without white noise).
+  angles in the 16-state truth, columns 6:9); the MIMU samples the true rate and specific force
+  and gives the true biases, each run's turn-on bias plus its random-walk drift
+  (:func:`~quadest.simulation.imu.measure_mimu`).
 - Input: the gyro sample and, with ``known_acceleration``, the true earth-frame acceleration
   ``a_e = R f_b + g_e`` (an ideal aiding source); otherwise ``a_e = 0`` and ``R_acc`` grows by
   ``acceleration_std²`` per axis, as a replay without aiding must do.
@@ -11,9 +12,9 @@ the magnetometer, and bind :class:`~quadest.models.attitude.AttitudeFilterModel`
   hard-iron drift the filter does not estimate at mid-run; ``Q`` per step:
   ``δθ: σ_g² T + attitude²``, ``δb_g: σ_bg² T``, ``δb_a: σ_ba² T``, all times ``inflation``.
   ``attitude`` (default 0) is room for propagation error beyond the gyro noise: with the gyro
-  averaged over each step (:func:`interval_average`) the one-step residual of the truth on the
-  figure eight is 6.2e-6 rad per axis, the gyro noise ``σ_g √(T/2)`` itself; a zero-order hold
-  would leave ``½ ω̇ T²`` ≈ 1e-4 rad, correlated from step to step.
+  averaged over each step (:func:`~quadest.simulation.imu.interval_means`) the one-step
+  residual of the truth on the figure eight is 6.2e-6 rad per axis, the gyro noise ``σ_g √(T/2)``
+  itself; a zero-order hold would leave ``½ ω̇ T²`` ≈ 1e-4 rad, correlated from step to step.
 - x0 = truth ⊞ L0 w with ``w ~ N(0, I)`` from each run's ``"initial"`` stream (the quaternion
   moves on the manifold, not by adding to its components).
 
@@ -28,7 +29,6 @@ differences, one-sided at the ends); the triads are taken as nominal.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 
 import numpy as np
@@ -45,33 +45,12 @@ from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.quadrotor.kinematics import rotation
 from quadest.sensors.base import TrueMotion
 from quadest.sensors.magnetometer import Magnetometer
-from quadest.sensors.mimu import TriadErrors, TriadSpec, draw_triad_errors, measure_triad
-from quadest.sensors.noise_laws import noise_law_from_config
+from quadest.sensors.mimu import TriadErrors, TriadSpec
 from quadest.simulation.aiding import sensor_context
+from quadest.simulation.imu import interval_means, measure_mimu, read_recorded_imu, recorded_imu_data
 from quadest.simulation.quadrotor_data import fly_scenario
-from quadest.simulation.recorded import IMU_STEP_RTOL, read_imu_recordings, recorded_data, resolve_recording
+from quadest.simulation.recorded import resolve_recording
 from quadest.simulation.spec import ModelSpec
-
-
-def _measure_with_truth_bias(spec: TriadSpec, errors: TriadErrors, y: np.ndarray, T: float, rngs, law):
-    """``(z, b)``: the triad's samples and its true bias ``b0 + b(t)`` (B, K+1, 3). The bias comes
-    from the same draws measured without white noise (copies of the generators), so it is exactly
-    the drift inside ``z``."""
-    z = measure_triad(spec, errors, y, T, [copy.deepcopy(r) for r in rngs], law)
-    quiet = TriadSpec(**{**spec.__dict__, "white_noise": 0.0})
-    drift_only = measure_triad(quiet, errors, y, T, rngs, law)
-    bias = drift_only - (errors.apply(y) - errors.bias[:, None])
-    return z, bias
-
-
-def interval_average(samples: np.ndarray) -> np.ndarray:
-    """``(y_k + y_{k+1})/2`` at step k (the last sample kept): the gyro over the step from t_k to
-    t_{k+1}, as an IMU's delta-angle output gives it (PX4's integrated gyro), so that
-    ``q_{k+1} = q_k ⊗ exp(ω̄_k T)`` is the midpoint rule rather than a zero-order hold (whose
-    error ``½ ω̇ T²`` per step is correlated from step to step and not white process noise)."""
-    out = samples.copy()
-    out[:, :-1] = 0.5 * (samples[:, :-1] + samples[:, 1:])
-    return out
 
 
 def validate_attitude(settings: DataSettings) -> None:
@@ -116,19 +95,9 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     g_e = np.array([0.0, 0.0, -float(mcfg.gravity)])
 
     scale = float(scfg.error_scale)
-    accel, gyro = triad_spec(scfg.accel, scale), triad_spec(scfg.gyro, scale)
-    accel_errors = draw_triad_errors(accel, streams["accel_errors"])
-    gyro_errors = draw_triad_errors(gyro, streams["gyro_errors"])
-    accel_law = noise_law_from_config(scfg.accel.noise_law)
-    gyro_law = noise_law_from_config(scfg.gyro.noise_law)
+    imu = measure_mimu(settings, truth.specific_force, truth.state[..., 9:12], streams)
     angles = truth.state[..., 6:9]
-    z_acc, accel_bias = _measure_with_truth_bias(
-        accel, accel_errors, truth.specific_force, T, streams["accel_noise"], accel_law
-    )
-    z_gyro, gyro_bias = _measure_with_truth_bias(
-        gyro, gyro_errors, truth.state[..., 9:12], T, streams["gyro_noise"], gyro_law
-    )
-    x_true = AttitudeFilterModel.truth_state(angles, gyro_bias, accel_bias)
+    x_true = AttitudeFilterModel.truth_state(angles, imu.gyro_bias, imu.accel_bias)
     noise = float(mcfg.measurement_noise_inflation)
     magnetometer = Magnetometer(mcfg.magnetometer, sensor_context(settings, mcfg.calibrated, noise))
     motion = TrueMotion(truth.time, truth.state[..., 0:3], truth.state[..., 3:6], x_true[..., :4])
@@ -137,8 +106,8 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     known = bool(mcfg.known_acceleration)
     a_e = np.einsum("bkij,bkj->bki", rotation(angles), truth.specific_force) + g_e if known else np.zeros_like(angles)
 
-    Q, r_acc = _filter_noise(settings, gyro, accel)
-    assumed = (gyro_errors, accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
+    Q, r_acc = _filter_noise(settings, imu.gyro, imu.accel)
+    assumed = (imu.gyro_errors, imu.accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
     model = AttitudeFilterModel(
         T,
         g_e,
@@ -155,16 +124,21 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
     offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 9)), P0, streams["initial"])
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
-        "model": mcfg.name, "calibrated": bool(mcfg.calibrated), "known_acceleration": known,
-        "sensor": scfg.name, "error_scale": scale, "scenario": flown.name, "mag_rate": float(mcfg.magnetometer.rate),
-    }  # fmt: skip
+        "model": mcfg.name,
+        "calibrated": bool(mcfg.calibrated),
+        "known_acceleration": known,
+        "sensor": scfg.name,
+        "error_scale": scale,
+        "scenario": flown.name,
+        "mag_rate": float(mcfg.magnetometer.rate),
+    }
     return MonteCarloData(
         model=model,
         time=truth.time,
         truth=x_true,
         companion_truth=np.zeros((runs, truth.time.size, 0)),
-        inputs=np.concatenate([interval_average(z_gyro), a_e], axis=-1),
-        measurements=z_acc,
+        inputs=np.concatenate([interval_means(imu.z_gyro), a_e], axis=-1),
+        measurements=imu.z_acc,
         x0=x0,
         P0=P0,
         companion0=np.zeros((runs, 0)),
@@ -175,21 +149,17 @@ def build_attitude_data(settings: DataSettings) -> MonteCarloData:
 
 
 def build_recorded_attitude_data(settings: DataSettings) -> MonteCarloData:
-    """The recordings of ``model.recording`` as the attitude filters' data (module docstring).
-
-    Raises:
-        ConfigError: ``model.recording`` is not an IMU recording
-            (:func:`~quadest.simulation.recorded.read_imu_recordings`) or does not fit the job
-            (:func:`~quadest.simulation.recorded.recorded_data`).
-    """
+    """The recordings of ``model.recording`` as the attitude filters' data (module docstring): the
+    recorded gyro the input, the accelerometer the measurement, a synthetic magnetometer beside.
+    A recording that is not an IMU recording or does not fit the job raises
+    :class:`~quadest.errors.ConfigError` (:func:`~quadest.simulation.imu.read_recorded_imu`,
+    :func:`~quadest.simulation.recorded.recorded_data`)."""
     mcfg, scfg = settings.model, settings.sensor
-    runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
-    recordings = read_imu_recordings(settings)
-    streams = run_streams(seed, runs, settings.first_run)
+    runs, T = int(settings.runs), float(settings.sample_period)
+    recordings, streams, sensed = read_recorded_imu(settings)
     time = recordings[0].time
     reference = np.stack([r.truth for r in recordings])
     noise = float(mcfg.measurement_noise_inflation)
-    sensed = dataclasses.replace(settings, duration=float(time[-1] - time[0]))
     magnetometer = Magnetometer(mcfg.magnetometer, sensor_context(sensed, mcfg.calibrated, noise))
     motion = TrueMotion(time - time[0], reference[..., 4:7], reference[..., 7:10], reference[..., 0:4])
     z_mag = magnetometer.simulate(motion, {name: streams[name] for name in Magnetometer.stream_names()})
@@ -200,25 +170,35 @@ def build_recorded_attitude_data(settings: DataSettings) -> MonteCarloData:
             r,
             measurements=r.inputs[:, 3:6],
             truth=np.concatenate([r.truth[:, 0:4], r.truth[:, 10:16]], axis=-1),  # [q, b_g, b_a]
-            inputs=np.concatenate([interval_average(r.inputs[None, :, 0:3])[0], a], axis=-1),
+            inputs=np.concatenate([interval_means(r.inputs[None, :, 0:3])[0], a], axis=-1),
         )
         for r, a in zip(recordings, a_e, strict=True)
     ]
     scale = float(scfg.error_scale)
     Q, r_acc = _filter_noise(settings, triad_spec(scfg.gyro, scale), triad_spec(scfg.accel, scale))
     model = AttitudeFilterModel(
-        T, np.array([0.0, 0.0, -float(mcfg.gravity)]), magnetometer.mag_earth, Q, noise * r_acc * np.eye(3),
-        magnetometer.noise_covariance(), None, None, magnetometer.assumed_errors(), batch_size=runs,
-    )  # fmt: skip
-    P0 = _initial_covariance(settings)
-    offsets = draw_initial_estimates(np.zeros((runs, 9)), P0, streams["initial"])
-    x0 = model.boxplus(np.stack([r.truth[0] for r in recordings]), offsets)
+        T,
+        np.array([0.0, 0.0, -float(mcfg.gravity)]),
+        magnetometer.mag_earth,
+        Q,
+        noise * r_acc * np.eye(3),
+        magnetometer.noise_covariance(),
+        None,
+        None,
+        magnetometer.assumed_errors(),
+        batch_size=runs,
+    )
     labels = {
-        "model": mcfg.name, "recording": str(mcfg.recording), "known_acceleration": known, "sensor": scfg.name,
-        "mag_rate": float(mcfg.magnetometer.rate), **recordings[0].notes,
-    }  # fmt: skip
-    return recorded_data(settings, model, recordings, x0, P0, starts_at_first_sample=True, step_rtol=IMU_STEP_RTOL,
-                         sensors={"mag": z_mag}, labels=labels)  # fmt: skip
+        "model": mcfg.name,
+        "recording": str(mcfg.recording),
+        "known_acceleration": known,
+        "sensor": scfg.name,
+        "mag_rate": float(mcfg.magnetometer.rate),
+        **recordings[0].notes,
+    }
+    return recorded_imu_data(
+        settings, model, recordings, _initial_covariance(settings), streams, {"mag": z_mag}, labels
+    )
 
 
 MODEL = ModelSpec(  # n_err = 9: attitude error, gyro and accelerometer biases

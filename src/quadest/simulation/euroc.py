@@ -27,7 +27,7 @@ samples before the first or after the last reference sample are dropped (counted
 recording's ``notes``: ``imu_dropped_before``, ``imu_dropped_after``, with the longest reference
 gap bridged by interpolation, ``reference_largest_gap_s``). Times count in seconds from the first
 kept IMU sample. The IMU samples are returned as measured (instantaneous); a model that expects
-the mean over the following step converts them (:func:`quadest.simulation.ins_data.interval_means`).
+the mean over the following step converts them (:func:`quadest.simulation.imu.interval_means`).
 """
 
 from __future__ import annotations

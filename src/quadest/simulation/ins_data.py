@@ -3,7 +3,7 @@ aiding sensors, and bind :class:`~quadest.models.ins.InsFilterModel` to the runs
 
 - Truth: :func:`~quadest.simulation.quadrotor_data.fly_scenario`; the attitude as a quaternion of
   the truth's ZYX Euler angles; the true biases are each run's turn-on bias plus its random-walk
-  drift (:func:`quadest.simulation.attitude_data._measure_with_truth_bias`).
+  drift (:func:`~quadest.simulation.imu.measure_mimu`).
 - IMU (the input): the MIMU of ``settings.sensor`` with its own streams (so adding an aiding sensor
   changes no MIMU draw) measuring, at each sample, the mean of the true rate and specific force
   over the step that follows (trapezoid of the truth's samples: a Δθ/Δv IMU).
@@ -26,12 +26,13 @@ aiding sensors, and bind :class:`~quadest.models.ins.InsFilterModel` to the runs
 With ``model.recording`` (a file or an EuRoC-layout folder, :mod:`quadest.simulation.recorded`,
 :mod:`quadest.simulation.euroc`) nothing is flown: each recording is one run whose inputs are the
 IMU samples ``[ω̃, f̃]`` as measured (instantaneous; turned into the means over the following step
-by :func:`interval_means`, as the simulated IMU) and whose truth is the 16-column INS state of the
-reference. Its first ``duration`` seconds are used (all of it when shorter), its first sample is the
-filters' start (:func:`~quadest.simulation.recorded.recorded_data` with ``starts_at_first_sample``),
-the triads are taken as nominal (a real IMU's scale errors are unknown), ``Q`` and ``P0`` come from
-the same keys as above, and the aiding sensors of ``model.aiding`` measure the reference (each from
-its own streams: synthetic fixes of a recorded flight).
+by :func:`~quadest.simulation.imu.interval_means`, as the simulated IMU) and whose truth is
+the 16-column INS state of the reference. Its first ``duration`` seconds are used (all of it when
+shorter), its first sample is the filters' start (:func:`~quadest.simulation.recorded.recorded_data`
+with ``starts_at_first_sample``), the triads are taken as nominal (a real IMU's scale errors are
+unknown), ``Q`` and ``P0`` come from the same keys as above, and the aiding sensors of
+``model.aiding`` measure the reference (each from its own streams: synthetic fixes of a recorded
+flight).
 """
 
 from __future__ import annotations
@@ -52,21 +53,12 @@ from quadest.montecarlo.initial import draw_initial_estimates
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.quadrotor.scenarios import PlatformApproach
 from quadest.sensors.base import TrueMotion
-from quadest.sensors.mimu import TriadErrors, draw_triad_errors
-from quadest.sensors.noise_laws import noise_law_from_config
+from quadest.sensors.mimu import TriadErrors
 from quadest.simulation.aiding import measure_aiding, sensor_context, validate_aiding
-from quadest.simulation.attitude_data import _measure_with_truth_bias
+from quadest.simulation.imu import interval_means, measure_mimu, read_recorded_imu, recorded_imu_data
 from quadest.simulation.quadrotor_data import fly_scenario
-from quadest.simulation.recorded import IMU_STEP_RTOL, read_imu_recordings, recorded_data, resolve_recording
+from quadest.simulation.recorded import resolve_recording
 from quadest.simulation.spec import ModelSpec
-
-
-def interval_means(y: np.ndarray) -> np.ndarray:
-    """(B, K+1, d): sample k holds the mean of ``y`` over [t_k, t_{k+1}] by the trapezoid rule
-    (the last sample, which has no step after it, keeps its value)."""
-    out = np.array(y, dtype=float, copy=True)
-    out[:, :-1] = 0.5 * (y[:, :-1] + y[:, 1:])
-    return out
 
 
 def validate_ins(settings: DataSettings) -> None:
@@ -113,19 +105,11 @@ def build_ins_data(settings: DataSettings) -> MonteCarloData:
     _, flown, truth = fly_scenario(settings, streams)
 
     scale = float(scfg.error_scale)
-    accel, gyro = triad_spec(scfg.accel, scale), triad_spec(scfg.gyro, scale)
-    accel_errors = draw_triad_errors(accel, streams["accel_errors"])
-    gyro_errors = draw_triad_errors(gyro, streams["gyro_errors"])
-    accel_law = noise_law_from_config(scfg.accel.noise_law)
-    gyro_law = noise_law_from_config(scfg.gyro.noise_law)
-    z_acc, accel_bias = _measure_with_truth_bias(
-        accel, accel_errors, interval_means(truth.specific_force), T, streams["accel_noise"], accel_law
-    )
-    z_gyro, gyro_bias = _measure_with_truth_bias(
-        gyro, gyro_errors, interval_means(truth.state[..., 9:12]), T, streams["gyro_noise"], gyro_law
-    )
     state = truth.state
-    x_true = InsFilterModel.truth_state(state[..., 6:9], state[..., 0:3], state[..., 3:6], gyro_bias, accel_bias)
+    imu = measure_mimu(settings, interval_means(truth.specific_force), interval_means(state[..., 9:12]), streams)
+    x_true = InsFilterModel.truth_state(
+        state[..., 6:9], state[..., 0:3], state[..., 3:6], imu.gyro_bias, imu.accel_bias
+    )
 
     platform = flown.platform_position(truth.time) if isinstance(flown, PlatformApproach) else None
     motion = TrueMotion(truth.time, x_true[..., 4:7], x_true[..., 7:10], x_true[..., 0:4], platform)
@@ -136,21 +120,32 @@ def build_ins_data(settings: DataSettings) -> MonteCarloData:
         ins_layout(platform_input=platform is not None),
         sensor_context(settings, settings.model.calibrated, settings.model.measurement_noise_inflation),
     )
-    assumed = (gyro_errors, accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
-    Q = process_noise(gyro, accel, mcfg.ins_process_noise, T)
+    assumed = (imu.gyro_errors, imu.accel_errors) if mcfg.calibrated else (TriadErrors.nominal(runs),) * 2
+    Q = process_noise(imu.gyro, imu.accel, mcfg.ins_process_noise, T)
     model = InsFilterModel(
-        T, float(mcfg.gravity), Q, aiding, *assumed, chart=mcfg.attitude_chart, batch_size=runs,
+        T,
+        float(mcfg.gravity),
+        Q,
+        aiding,
+        *assumed,
+        chart=mcfg.attitude_chart,
+        batch_size=runs,
         platform_input=platform is not None,
-    )  # fmt: skip
-    inputs = [z_gyro, z_acc] + ([] if platform is None else [np.broadcast_to(platform, z_gyro.shape)])
+    )
+    inputs = [imu.z_gyro, imu.z_acc] + ([] if platform is None else [np.broadcast_to(platform, imu.z_gyro.shape)])
 
     P0 = _initial_covariance(settings)
     offsets = draw_initial_estimates(np.zeros((len(streams["initial"]), 15)), P0, streams["initial"])
     x0 = model.boxplus(x_true[:, 0], offsets)
     labels = {
-        "model": mcfg.name, "calibrated": bool(mcfg.calibrated), "sensor": scfg.name, "error_scale": scale,
-        "scenario": flown.name, "attitude_chart": mcfg.attitude_chart, "aiding": "+".join(mcfg.aiding),
-    }  # fmt: skip
+        "model": mcfg.name,
+        "calibrated": bool(mcfg.calibrated),
+        "sensor": scfg.name,
+        "error_scale": scale,
+        "scenario": flown.name,
+        "attitude_chart": mcfg.attitude_chart,
+        "aiding": "+".join(mcfg.aiding),
+    }
     K1 = truth.time.size
     return MonteCarloData(
         model=model,
@@ -175,22 +170,16 @@ def _initial_covariance(settings: DataSettings) -> np.ndarray:
 
 
 def build_recorded_ins_data(settings: DataSettings) -> MonteCarloData:
-    """The recordings of ``model.recording`` as the INS filters' data (module docstring).
-
-    Raises:
-        ConfigError: ``model.recording`` is not an IMU recording
-            (:func:`~quadest.simulation.recorded.read_imu_recordings`) or does not fit the job
-            (:func:`~quadest.simulation.recorded.recorded_data`).
-    """
+    """The recordings of ``model.recording`` as the INS filters' data (module docstring): the
+    IMU samples the input, the aiding sensors of ``model.aiding`` measuring the reference.
+    A recording that is not an IMU recording or does not fit the job raises
+    :class:`~quadest.errors.ConfigError` (:func:`~quadest.simulation.imu.read_recorded_imu`,
+    :func:`~quadest.simulation.recorded.recorded_data`)."""
     mcfg, scfg = settings.model, settings.sensor
-    runs, T, seed = int(settings.runs), float(settings.sample_period), int(settings.seed)
-    recordings = [
-        dataclasses.replace(r, inputs=interval_means(r.inputs[None])[0]) for r in read_imu_recordings(settings)
-    ]
-    streams = run_streams(seed, runs, settings.first_run)
+    runs, T = int(settings.runs), float(settings.sample_period)
+    read, streams, sensed = read_recorded_imu(settings)
+    recordings = [dataclasses.replace(r, inputs=interval_means(r.inputs[None])[0]) for r in read]
     truth = np.stack([r.truth for r in recordings])
-    duration = float(recordings[0].time[-1] - recordings[0].time[0])
-    sensed = dataclasses.replace(settings, duration=duration)
     motion = TrueMotion(recordings[0].time - recordings[0].time[0], truth[..., POS], truth[..., VEL], truth[..., ATT])
     records, aiding = measure_aiding(
         sensed, motion, streams, ins_layout(), sensor_context(sensed, mcfg.calibrated, mcfg.measurement_noise_inflation)
@@ -199,15 +188,15 @@ def build_recorded_ins_data(settings: DataSettings) -> MonteCarloData:
     gyro, accel = triad_spec(scfg.gyro, scale), triad_spec(scfg.accel, scale)
     Q = process_noise(gyro, accel, mcfg.ins_process_noise, T)
     model = InsFilterModel(T, float(mcfg.gravity), Q, aiding, chart=mcfg.attitude_chart, batch_size=runs)
-    P0 = _initial_covariance(settings)
-    offsets = draw_initial_estimates(np.zeros((runs, 15)), P0, streams["initial"])
-    x0 = model.boxplus(truth[:, 0], offsets)
     labels = {
-        "model": mcfg.name, "recording": str(mcfg.recording), "sensor": scfg.name,
-        "attitude_chart": mcfg.attitude_chart, "aiding": "+".join(mcfg.aiding), **recordings[0].notes,
-    }  # fmt: skip
-    return recorded_data(settings, model, recordings, x0, P0, starts_at_first_sample=True, step_rtol=IMU_STEP_RTOL,
-                         sensors=records, labels=labels)  # fmt: skip
+        "model": mcfg.name,
+        "recording": str(mcfg.recording),
+        "sensor": scfg.name,
+        "attitude_chart": mcfg.attitude_chart,
+        "aiding": "+".join(mcfg.aiding),
+        **recordings[0].notes,
+    }
+    return recorded_imu_data(settings, model, recordings, _initial_covariance(settings), streams, records, labels)
 
 
 MODEL = ModelSpec(  # n_err = 15
