@@ -1727,6 +1727,38 @@ MUTATIONS += (  # a bad sensor rate: one line naming the sensor's own key and th
     ),
 )
 
+PARTICLE_RESIDUAL = RESIDUAL + "test_a_wrapped_bearing_residual_keeps_every_particle_filter_on_the_truth"
+MUTATIONS += (  # the particle filters weigh and propose with the measurement's residual
+    Mutation(
+        "the particle filters' likelihood of z − h(x) instead of the residual",
+        "src/quadest/estimators/particle.py",
+        "residual = self.model.measurement(None).innovation(z[:, None, :], self.model.h(x_new, u))",
+        "residual = z[:, None, :] - self.model.h(x_new, u)",
+        (PARTICLE_RESIDUAL + "[pf]", PARTICLE_RESIDUAL + "[ilopf]"),
+    ),
+    Mutation(
+        "the fast bootstrap step handed h(x) whatever the residual",
+        "src/quadest/estimators/particle.py",
+        "            if meas.residual is not None:  # the fused step forms z − hx: hand it z − r(z, hx)",
+        "            if False:",
+        (PARTICLE_RESIDUAL + "[pf-fast]",),
+    ),
+    Mutation(
+        "the EKPF's proposal corrected with z − ẑ",
+        "src/quadest/estimators/particle_ekpf.py",
+        "model.measurement(None).innovation(z[:, None, :], moments.mean)",
+        "z[:, None, :] - moments.mean",
+        (PARTICLE_RESIDUAL + "[ekpf]",),
+    ),
+    Mutation(
+        "the UPF's proposal corrected with z − ẑ",
+        "src/quadest/estimators/particle_upf.py",
+        "model.measurement(None).innovation(z[:, None, :], y_pred)",
+        "z[:, None, :] - y_pred",
+        (PARTICLE_RESIDUAL + "[upf]",),
+    ),
+)  # fmt: skip
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""

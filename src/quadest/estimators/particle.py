@@ -307,7 +307,8 @@ class ParticleFilter(Estimator):
         x_prev = self.x
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             x_new, log_q = self.propose(self._u_prev, z, u)
-            incr = self.model.measurement_noise_logpdf(z[:, None, :] - self.model.h(x_new, u))
+            residual = self.model.measurement(None).innovation(z[:, None, :], self.model.h(x_new, u))
+            incr = self.model.measurement_noise_logpdf(residual)
             self.floored_steps += ~np.any(incr > self.log_floor, axis=1)
             if self.weights == "linear_floor":
                 incr = np.logaddexp(incr, self.log_floor)
@@ -474,6 +475,9 @@ class BootstrapPF(ParticleFilter):
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             x_new, _ = self.propose(self._u_prev, z, u)
             hx = self.model.h(x_new, u)
+            meas = self.model.measurement(None)
+            if meas.residual is not None:  # the fused step forms z − hx: hand it z − r(z, hx)
+                hx = z[:, None, :] - meas.innovation(z[:, None, :], hx)
         uniforms = draw_step_uniforms(self.resampling, self.rngs, self.N)
         out = fast_bootstrap_step(
             x_new,

@@ -117,6 +117,8 @@ class EKPF(ParticleFilter):
         H = model.H_points(x_pred, u)
         moments = linearized_moments(model.h(x_pred, u), H, P_pred, self.R_proposal)
         Sy = self._particle_factors(symmetric(moments.cov), "proposal innovation covariance")
-        conditioned = kalman_correction(z[:, None, :] - moments.mean, moments.cross, Sy)
+        conditioned = kalman_correction(
+            model.measurement(None).innovation(z[:, None, :], moments.mean), moments.cross, Sy
+        )
         P_new = joseph_covariance(P_pred, H, self.R_proposal, conditioned.gain)
         return x_pred + conditioned.correction, symmetric(P_new)

@@ -120,9 +120,10 @@ class UPF(EKPF):
             Y = model.h(Xx, u)
             R = self.R_proposal
         Xx, Y = Xx.reshape(B, N, -1, n), Y.reshape(B, N, Xx.shape[1] // N, -1)
-        (x_pred, DX), (y_pred, DY) = point_mean(Xx, wm), point_mean(Y, wm)
+        residual = model.measurement(None).residual  # a bearing's: the ⊟ of the measurement space
+        (x_pred, DX), (y_pred, DY) = point_mean(Xx, wm), point_mean(Y, wm, np.add, residual)
         moments = sigma_point_moments(self.rule, DX, DY, na, y_pred, R)
         Sy = self._particle_factors(moments.cov, "proposal innovation covariance")
-        conditioned = kalman_correction(z[:, None, :] - y_pred, moments.cross, Sy)
+        conditioned = kalman_correction(model.measurement(None).innovation(z[:, None, :], y_pred), moments.cross, Sy)
         P_pred = sigma_point_covariance(self.rule, DX, na)
         return x_pred + conditioned.correction, covariance_posterior(P_pred, conditioned.gain, moments.cov)
