@@ -103,6 +103,7 @@ LAYERS: dict[str, str] = {
     "test_quaternion.py": "unit",
     "test_ranking.py": "unit",
     "test_recorded_data.py": "unit",
+    "test_registry.py": "unit",
     "test_replay.py": "unit",
     "test_replay_timing.py": "unit",
     "test_replay_truth.py": "integration",

@@ -22,14 +22,15 @@ from quadest.config.ranges import require_non_negative, require_positive
 from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.estimators.params import parameter_problem
-from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
+from quadest.estimators.registry import discover as discover_estimators
+from quadest.estimators.registry import resolve
 from quadest.estimators.smoother_settings import smoother_settings
 from quadest.evaluation.objective import validate_objective
 from quadest.numerics.square_root import requested_kernels
 from quadest.quadrotor.scenarios import SCENARIOS
 from quadest.replay.data import validate_replay
 from quadest.sensors.noise_laws import check_noise_law
-from quadest.simulation.aiding import report_plugin_problems as report_sensor_problems
+from quadest.sensors.registry import discover as discover_sensors
 from quadest.simulation.registry import model_spec, state_dimension
 
 
@@ -59,7 +60,7 @@ def validate_run(experiment: ExperimentConf) -> None:
 
 def validate_model(settings: DataSettings) -> None:
     spec = model_spec(settings.model.name)  # an unknown name or a broken plugin: one line
-    report_sensor_problems(list(getattr(settings.model, "aiding", None) or []))
+    discover_sensors().refuse_selected(getattr(settings.model, "aiding", None) or [], key="model.aiding")
     spec.validate(settings)
     if spec.uses_quadrotor_groups:
         validate_sensor(settings)
@@ -102,8 +103,9 @@ def validate_scenario(settings: DataSettings) -> None:
 
 def validate_estimators(experiment: ExperimentConf, settings: DataSettings) -> None:
     if not experiment.estimator:
-        raise ConfigError("estimator", "[]", f"select at least one of {sorted(builtin_estimators())}")
-    report_plugin_problems({node.get("kind", label) for label, node in experiment.estimator.items()})
+        raise ConfigError("estimator", "[]", f"select at least one of {sorted(discover_estimators().usable)}")
+    selected = {node.get("kind", label) for label, node in experiment.estimator.items()}
+    discover_estimators().refuse_selected(selected, key="estimator")
     n = state_dimension(settings)
     for label, node in experiment.estimator.items():
         cls, params = resolve(label, node)
