@@ -116,6 +116,7 @@ LAYERS: dict[str, str] = {
     "test_robust.py": "unit",
     "test_roughening.py": "unit",
     "test_rules.py": "unit",
+    "test_scenario_plugins.py": "integration",
     "test_science_gaps.py": "integration",
     "test_seed001_flown_truth.py": "unit",
     "test_seed001_rates.py": "unit",

@@ -22,10 +22,11 @@ from quadest.app import cli
 from quadest.app.schema import register_schemas
 from quadest.errors import PluginError
 from quadest.estimators import registry as estimators
+from quadest.quadrotor import scenario_registry as scenarios
 from quadest.sensors import registry as sensors
 from quadest.simulation import registry as models
 
-REGISTRIES = {"estimator": estimators, "model": models, "sensor": sensors}
+REGISTRIES = {"estimator": estimators, "model": models, "scenario": scenarios, "sensor": sensors}
 
 # A module of each kind's package that declares the extension "halfdone" and breaks the contract.
 HALF_DONE = {
@@ -56,6 +57,17 @@ HALF_DONE = {
         "HALF_DONE",
         "its schema must be a dataclass; its build must be callable",
     ),
+    "scenario": (
+        "quadest.quadrotor",
+        """
+        from quadest.quadrotor.scenarios import Scenario
+
+        class HalfDone(Scenario):
+            name = "halfdone"
+        """,
+        "HalfDone",
+        "it must be a dataclass (its fields are the scenario node's keys)",
+    ),
     "sensor": (
         "quadest.sensors",
         """
@@ -81,6 +93,12 @@ TWIN = {
         "import dataclasses\nfrom quadest.simulation.validation_data import LINEAR\n\n"
         "TWIN_{x} = dataclasses.replace(LINEAR, name='twin')\n",
         "TWIN_{x}",
+    ),
+    "scenario": (
+        "quadest.quadrotor",
+        "from dataclasses import dataclass\nfrom quadest.quadrotor.scenarios import Hover\n\n"
+        "@dataclass\nclass Twin{x}(Hover):\n    name: str = 'twin'\n",
+        "Twin{x}",
     ),
     "sensor": (
         "quadest.sensors",

@@ -1294,9 +1294,9 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
     ),
     Mutation(
         "a scenario's transition_time left unchecked",
-        "src/quadest/app/validate.py",
-        '"spin_up_time", "transition_time", "approach_time")',
-        '"spin_up_time", "approach_time")',
+        "src/quadest/quadrotor/scenarios.py",
+        '        require_positive(f"{prefix}.transition_time", self.transition_time)\n',
+        "",
         (B_CONFIG + "test_a_transition_time_that_is_not_positive_is_refused_before_any_work",),
     ),
     Mutation(

@@ -25,7 +25,7 @@ from quadest.errors import ConfigError, PluginError
 from quadest.estimators.registry import discover as discover_estimators
 from quadest.evaluation.objective import ObjectiveConf
 from quadest.metrics.settings import MetricsConf
-from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.quadrotor.scenario_registry import discover as discover_scenarios
 from quadest.replay.data import SourceConf
 from quadest.sensors.barometer import BarometerSpec
 from quadest.sensors.gps import GPSSpec
@@ -154,11 +154,17 @@ def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:
 
 def registry_line(group: str, name: str, group_found: bool = True) -> str | None:
     """The registry's line for option ``name`` of config group ``group`` that Hydra could not load
-    (``estimator/<name>``, ``model/<name>``, their ``schema/`` nodes, ``sensor/<sensor>/<name>``):
+    (``estimator/<name>``, ``model/<name>``, ``scenario/<name>``, their ``schema/`` nodes,
+    ``sensor/<sensor>/<name>``):
     the problem of a refused extension, or, for a registered one, that its YAML is not on the search
     path (:mod:`quadest.config.registry`); ``None`` for a name no registry knows. A sensor's options
     sit in a group of their own, which Hydra lists when it finds the group (``group_found``)."""
-    registries = {"estimator": discover_estimators, "model": discover_models, "sensor": discover_sensors}
+    registries = {
+        "estimator": discover_estimators,
+        "model": discover_models,
+        "scenario": discover_scenarios,
+        "sensor": discover_sensors,
+    }
     kind, _, sensor = group.removeprefix("schema/").partition("/")
     if kind not in registries or (kind == "sensor") != bool(sensor):
         return None
@@ -193,7 +199,7 @@ def register_schemas() -> None:
     for name in set(models.problems) - set(models.usable):  # composes, so that the pre-run check names the problem
         cs.store(group="schema/model", name=name, node={"name": name})
     cs.store(group="schema/sensor", name="sensor", node=sensor_schema())
-    for name, cls in SCENARIOS.items():
+    for name, cls in discover_scenarios().usable.items():
         cs.store(group="schema/scenario", name=name, node=cls)
     estimators = discover_estimators()
     for name, spec in estimators.usable.items():

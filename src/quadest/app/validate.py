@@ -27,7 +27,7 @@ from quadest.estimators.registry import resolve
 from quadest.estimators.smoother_settings import smoother_settings
 from quadest.evaluation.objective import validate_objective
 from quadest.numerics.square_root import requested_kernels
-from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.quadrotor.scenario_registry import discover as discover_scenarios
 from quadest.replay.data import validate_replay
 from quadest.sensors.noise_laws import check_noise_law
 from quadest.sensors.registry import discover as discover_sensors
@@ -91,14 +91,11 @@ def validate_sensor(settings: DataSettings) -> None:
 
 def validate_scenario(settings: DataSettings) -> None:
     sc = settings.scenario
-    if sc.name not in SCENARIOS:
-        raise ConfigError("scenario.name", sc.name, f"one of {sorted(SCENARIOS)}")
-    require_non_negative("scenario.initial_position_std", sc.initial_position_std)
-    require_positive("scenario.altitude", sc.altitude)
-    require_non_negative("scenario.takeoff_time", sc.takeoff_time)
-    for key in ("period", "spin_up_time", "transition_time", "approach_time"):
-        if hasattr(sc, key):
-            require_positive(f"scenario.{key}", getattr(sc, key))
+    found = discover_scenarios()
+    found.refuse_selected([sc.name], key="scenario.name")
+    if sc.name not in found.usable:
+        raise ConfigError("scenario.name", sc.name, f"one of {sorted(found.usable)}")
+    sc.validate()
 
 
 def validate_estimators(experiment: ExperimentConf, settings: DataSettings) -> None:
