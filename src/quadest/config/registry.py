@@ -1,11 +1,12 @@
-"""One registry behaviour for every extension kind: estimators, models and sensors
-(docs/plugins.md, "Registries").
+"""One registry behaviour for every extension kind: estimators, models, sensors and scenarios
+(docs/plugins.md, "Errors you may meet").
 
 An extension comes from one of two places:
 
 1. **The repository**: the registry imports every module of the kind's package once and asks
    the kind which of the module's objects declare themselves extensions (an estimator or sensor
-   class that sets ``config_name``, a module-level model spec), under which name.
+   class that sets ``config_name``, a module-level model spec, a scenario class that sets its own
+   ``name``), under which name.
 2. **An installed package**: an entry point in the kind's group, whose name is the extension's
    name (``"ckf2 = mypkg.filters:CKF2"``).
 
