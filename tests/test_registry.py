@@ -230,6 +230,7 @@ def test_a_plugin_named_like_a_built_in_names_both(installed):
 PLUGINS_OF_EACH_KIND = (
     "[quadest.estimators]\nmy_iekf = my_iekf:MyIEKF\n"
     "[quadest.models]\npendulum = pendulum_model:MODEL\n"
+    "[quadest.scenarios]\nclimb = climb_scenario:Climb\n"
     "[quadest.sensors]\nrangefinder = rangefinder_sensor:Rangefinder\n"
 )
 
@@ -241,27 +242,64 @@ def test_the_builtins_view_leaves_installed_plugins_out(installed):
         registry.discover.cache_clear()
     assert set(estimators.estimator_specs()) - set(estimators.builtin_estimators()) == {"my_iekf"}
     assert set(models.model_specs()) - set(models.builtin_model_specs()) == {"pendulum"}
+    assert set(scenarios.scenario_classes()) - set(scenarios.builtin_scenario_classes()) == {"climb"}
     assert set(sensors.sensor_classes()) - set(sensors.builtin_sensor_classes()) == {"rangefinder"}
     assert {kind: set(registry.discover().builtins()) for kind, registry in REGISTRIES.items()} == before
 
 
+# The tested plugins renamed "ghost": no YAML of theirs is on any search path, whatever search-path
+# plugins other tests of the process have made Hydra load.
+GHOSTS = """
+import dataclasses
+
+from climb_scenario import Climb
+from my_iekf import MyIEKF
+from pendulum_model import MODEL as PENDULUM
+from rangefinder_sensor import Rangefinder
+
+GHOST_MODEL = dataclasses.replace(PENDULUM, name="ghost")
+
+
+class GhostFilter(MyIEKF):
+    config_name = "ghost"
+
+
+class GhostSensor(Rangefinder):
+    config_name = "ghost"
+
+
+@dataclasses.dataclass
+class GhostScenario(Climb):
+    name: str = "ghost"
+"""
+GHOST_ENTRY_POINTS = (
+    "[quadest.estimators]\nghost = ghosts:GhostFilter\n"
+    "[quadest.models]\nghost = ghosts:GHOST_MODEL\n"
+    "[quadest.scenarios]\nghost = ghosts:GhostScenario\n"
+    "[quadest.sensors]\nghost = ghosts:GhostSensor\n"
+)
+
+
 @pytest.mark.parametrize(
-    ("override", "kind", "name", "yaml"),
+    ("override", "kind", "yaml"),
     [
-        ("estimator=[my_iekf]", "estimator", "my_iekf", "estimator/my_iekf.yaml"),
-        ("model=pendulum", "model", "pendulum", "model/pendulum.yaml"),
-        ("+sensor/rangefinder=lidar_lite", "sensor", "rangefinder", "sensor/rangefinder/lidar_lite.yaml"),
+        ("estimator=[ghost]", "estimator", "estimator/ghost.yaml"),
+        ("model=ghost", "model", "model/ghost.yaml"),
+        ("scenario=ghost", "scenario", "scenario/ghost.yaml"),
+        ("+sensor/ghost=preset", "sensor", "sensor/ghost/preset.yaml"),
     ],
 )
-def test_a_registered_extension_without_its_yaml_is_reported_as_such(installed, capsys, override, kind, name, yaml):
-    installed(PLUGINS_OF_EACH_KIND)
+def test_a_registered_extension_without_its_yaml_is_reported_as_such(installed, tmp_path, capsys, override, kind, yaml):
+    (tmp_path / "site").mkdir()
+    (tmp_path / "site" / "ghosts.py").write_text(GHOSTS)
+    installed(GHOST_ENTRY_POINTS)
     register_schemas()
     with pytest.raises(SystemExit):
         cli.precheck([override])
     err = capsys.readouterr().err.strip().splitlines()
-    origin = REGISTRIES[kind].discover().origins[name]
+    origin = REGISTRIES[kind].discover().origins["ghost"]
     assert err == [
-        f"quadest: error: {kind} '{name}' is registered ({origin}) but its YAML {yaml} is not on Hydra's config "
+        f"quadest: error: {kind} 'ghost' is registered ({origin}) but its YAML {yaml} is not on Hydra's config "
         "search path; an installed package ships it with a search-path plugin in its hydra_plugins/ folder "
         "(docs/plugins.md)"
     ]
