@@ -39,10 +39,10 @@ from quadest.cache.lookup import JobCache
 from quadest.cache.store import CacheStore
 from quadest.config.paths import config_dir
 from quadest.estimators.registry import builtin_estimators
-from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.quadrotor.scenario_registry import builtin_scenario_classes
 from quadest.replay.data import log_path
 from quadest.simulation.recorded import resolve_recording
-from quadest.simulation.registry import model_specs
+from quadest.simulation.registry import builtin_model_specs
 
 LeafPath = tuple[str | int, ...]
 
@@ -190,9 +190,9 @@ def test_the_family_covers_every_group_and_the_job_keys():
     groups = {o[0].split("=")[0] for o in OPTIONS if o}
     assert {"model", "sensor", "scenario", "estimator", "experiment"} <= groups
     options = {o[0] for o in OPTIONS if o}
-    assert {f"model={name}" for name in model_specs()} <= options, "a registered model without a config option"
+    assert {f"model={name}" for name in builtin_model_specs()} <= options, "a registered model without a config option"
     flown = {OmegaConf.get_type(compose_config([o]).scenario) for o in options if o.startswith("scenario=")}
-    assert set(SCENARIOS.values()) <= flown, "a scenario schema no config option uses"
+    assert set(builtin_scenario_classes().values()) <= flown, "a scenario schema no config option uses"
     walked = set(compose_config(OPTIONS[-1]).estimator)
     assert set(builtin_estimators()) <= walked, "a registered estimator the walk does not reach"
     top = set(OmegaConf.to_container(compose_config(), resolve=True))

@@ -176,7 +176,8 @@ def test_broken_model_plugins_are_reported_and_refused(broken_site, monkeypatch)
     monkeypatch.syspath_prepend(str(PLUGINS))
     registry.discover.cache_clear()
     try:
-        specs, problems = registry.discover()
+        found = registry.discover()
+        specs, problems = found.usable, found.problems
         assert specs["quadrotor"].build.__module__ == "quadest.simulation.quadrotor_data"  # the built-in stays
         assert "collides with the built-in model 'quadrotor'" in problems["quadrotor"]
         assert "failed to import: ModuleNotFoundError" in problems["broken"]

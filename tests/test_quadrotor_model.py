@@ -22,7 +22,7 @@ from quadest.quadrotor.dynamics import (
 )
 from quadest.quadrotor.kinematics import rate_matrix, rate_matrix_inv, rotation
 from quadest.quadrotor.params import QuadrotorParams
-from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.quadrotor.scenario_registry import builtin_scenario_classes
 from quadest.quadrotor.simulate import simulate_truth
 from quadest.sensors.encoders import encoder_resolution, measure_rotor_speeds
 from quadest.sensors.mimu import TriadSpec, draw_triad_errors, measure_triad
@@ -217,7 +217,7 @@ GAINS = BacksteppingGains()
 
 
 def fly(name: str, duration: float = 20.0):
-    scenario = SCENARIOS[name]()
+    scenario = builtin_scenario_classes()[name]()
     truth = simulate_truth(P, BacksteppingController(P, GAINS), scenario, np.zeros((1, 3)), duration, 0.01, 10)
     refs = [scenario.reference(t) for t in truth.time]
     return truth, refs
@@ -249,7 +249,7 @@ def test_controller_tracks_attitude_steps():
     assert err[:, :2].max() < 5.0  # roll and pitch, including the 0.5 s transitions
     assert err[:, 2].max() < 10.0  # yaw has little control authority (d ≪ l b)
     settled = np.ones_like(truth.time, dtype=bool)
-    for start, _, _ in SCENARIOS["attitude_steps"]().steps:
+    for start, _, _ in builtin_scenario_classes()["attitude_steps"]().steps:
         settled &= ~((truth.time >= start) & (truth.time < start + 1.5))
     assert err[settled].max() < 1.0
     assert np.abs(truth.state[0, truth.time > 3, 2] - 1.0).max() < 0.1

@@ -50,7 +50,7 @@ def registered(site, monkeypatch):
 
 
 def test_the_builtin_sensors_are_registered_sensors():
-    sensors = registry.sensor_classes()
+    sensors = registry.builtin_sensor_classes()
     assert set(sensors) == {"gps", "barometer", "vision", "magnetometer"}
     assert all(issubclass(cls, Sensor) and registry.is_builtin(cls) for cls in sensors.values())
     assert sensors["magnetometer"].key() == "model.magnetometer" and sensors["gps"].key() == "sensor.gps"
@@ -223,7 +223,8 @@ def test_broken_sensor_plugins_are_reported(broken_site, monkeypatch):
     monkeypatch.syspath_prepend(str(PLUGINS))
     registry.discover.cache_clear()
     try:
-        sensors, problems = registry.discover()
+        found = registry.discover()
+        sensors, problems = found.usable, found.problems
         assert sensors["gps"].__module__ == "quadest.sensors.gps"  # the built-in stays
         assert "collides with the built-in sensor 'gps'" in problems["gps"]
         assert "failed to import: ModuleNotFoundError" in problems["broken"]

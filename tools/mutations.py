@@ -1333,9 +1333,9 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
     ),
     Mutation(
         "a scenario's transition_time left unchecked",
-        "src/quadest/app/validate.py",
-        '"spin_up_time", "transition_time", "approach_time")',
-        '"spin_up_time", "approach_time")',
+        "src/quadest/quadrotor/scenarios.py",
+        '        require_positive(f"{prefix}.transition_time", self.transition_time)\n',
+        "",
         (B_CONFIG + "test_a_transition_time_that_is_not_positive_is_refused_before_any_work",),
     ),
     Mutation(
@@ -1758,6 +1758,49 @@ MUTATIONS += (  # the particle filters weigh and propose with the measurement's 
         (PARTICLE_RESIDUAL + "[upf]",),
     ),
 )  # fmt: skip
+
+REGISTRY = "tests/test_registry.py::"
+MUTATIONS += (  # one registry behaviour for every extension kind (src/quadest/config/registry.py)
+    Mutation(
+        "an in-repository extension that breaks its contract skipped silently",
+        "src/quadest/config/registry.py",
+        "        if issues:\n"
+        "            _add(problems, name, f\"{kind.kind} {origin} does not meet the contract: {'; '.join(issues)}\")\n",
+        "        if issues:\n",
+        (
+            REGISTRY + "test_an_in_repository_contract_break_is_one_line_naming_it",
+            REGISTRY + "test_a_broken_in_repository_estimator_is_named_when_its_yaml_is_selected",
+        ),
+    ),
+    Mutation(
+        "two in-repository extensions with one name: the last one wins",
+        "src/quadest/config/registry.py",
+        'claims.append((f"{module_name}.{attribute}", obj))',
+        'claims[:] = [(f"{module_name}.{attribute}", obj)]',
+        (REGISTRY + "test_two_in_repository_extensions_with_one_name_are_an_error_naming_both",),
+    ),
+    Mutation(
+        "two plugins with one name: the last one wins",
+        "src/quadest/config/registry.py",
+        "by_name.setdefault(ep.name, {}).setdefault(ep.value, ep)",
+        "by_name[ep.name] = {ep.value: ep}",
+        (REGISTRY + "test_two_plugins_with_one_name_are_an_error_naming_both",),
+    ),
+    Mutation(
+        "the built-ins view returns the installed plugins too",
+        "src/quadest/config/registry.py",
+        "return {name: entry for name, entry in self.usable.items() if name in self.builtin}",
+        "return dict(self.usable)",
+        (REGISTRY + "test_the_builtins_view_leaves_installed_plugins_out",),
+    ),
+    Mutation(
+        "a registered extension without its YAML reported as an unknown option",
+        "src/quadest/app/schema.py",
+        '        return missing_yaml(found, extension, f"{group}/{name}.yaml")',
+        "        return None",
+        (REGISTRY + "test_a_registered_extension_without_its_yaml_is_reported_as_such",),
+    ),
+)
 
 
 def tree_files() -> list[str]:

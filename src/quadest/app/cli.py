@@ -34,11 +34,10 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from quadest.app.cell_record import failed_cells, record_cell
 from quadest.app.job import run_validated
 from quadest.app.parent_watch import watch_parent
-from quadest.app.schema import register_schemas
+from quadest.app.schema import register_schemas, registry_line
 from quadest.app.validate import check_labels, validate
 from quadest.config.paths import config_dir
 from quadest.errors import ConfigError
-from quadest.estimators.registry import discover
 from quadest.evaluation.formatting import strict_json
 from quadest.evaluation.objective import objective_value
 
@@ -168,14 +167,15 @@ def one_line(exc: BaseException) -> str:
         if text:
             keep.append(text + ("," if line.startswith("\t") else ""))
     message = " ".join(keep).rstrip(",")
-    missing = re.search(r"Could not load '([\w/]+)/([^']+)'", message)
+    missing = re.search(r"Could not (load|find) '([\w/]+)/([^']+)'", message)
     if missing:
-        group, name = missing.groups()
-        problems = discover()[1] if group == "estimator" else {}
-        if name in problems:
-            return problems[name]
-        options = sorted(p.stem for p in (Path(config_dir()) / group).glob("*.yaml"))
-        message += f" Available options in '{group}': {', '.join(options)}"
+        verb, group, name = missing.groups()
+        line = registry_line(group, name)
+        if line is not None:
+            return line
+        if verb == "load":  # after "Could not find" Hydra lists the options itself
+            options = sorted(p.stem for p in (Path(config_dir()) / group).glob("*.yaml"))
+            message += f" Available options in '{group}': {', '.join(options)}"
     schema = getattr(cause, "object_type", None) or getattr(exc, "object_type", None)
     if schema is not None and dataclasses.is_dataclass(schema) and "not in" in message:
         message += f"; allowed keys: {', '.join(f.name for f in dataclasses.fields(schema))}"

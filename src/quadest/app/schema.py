@@ -20,16 +20,18 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 
 from quadest.cache.location import CacheConf
 from quadest.config.closed_loop import ClosedLoopConf
-from quadest.errors import ConfigError
-from quadest.estimators.registry import builtin_estimators
+from quadest.config.registry import missing_yaml
+from quadest.errors import ConfigError, PluginError
+from quadest.estimators.registry import discover as discover_estimators
 from quadest.evaluation.objective import ObjectiveConf
 from quadest.metrics.settings import MetricsConf
-from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.quadrotor.scenario_registry import discover as discover_scenarios
 from quadest.replay.data import SourceConf
 from quadest.sensors.barometer import BarometerSpec
 from quadest.sensors.gps import GPSSpec
 from quadest.sensors.mimu import TriadSpec
 from quadest.sensors.noise_laws import NoiseLaw
+from quadest.sensors.registry import discover as discover_sensors
 from quadest.sensors.registry import sensor_classes
 from quadest.sensors.vision import VisionSpec
 from quadest.simulation.registry import discover as discover_models
@@ -137,6 +139,9 @@ def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:
     declared = {f.name for f in dataclasses.fields(schema)} if dataclasses.is_dataclass(schema) else None
     for key in cfg.keys():
         child = cfg._get_node(key)
+        line = registry_line(str(key), str(child._value()), group_found=False) if "/" in str(key) else None
+        if line is not None:  # a config group Hydra did not find, taken for a key
+            raise PluginError(str(child._value()), line, key=f"{prefix}{key}")
         if declared is not None and key not in declared:
             raise ConfigError(
                 f"{prefix}{key}",
@@ -145,6 +150,30 @@ def check_known_keys(cfg: DictConfig, prefix: str = "") -> None:
             )
         if isinstance(child, DictConfig):
             check_known_keys(child, f"{prefix}{key}.")
+
+
+def registry_line(group: str, name: str, group_found: bool = True) -> str | None:
+    """The registry's line for option ``name`` of config group ``group`` that Hydra could not load
+    (``estimator/<name>``, ``model/<name>``, ``scenario/<name>``, their ``schema/`` nodes,
+    ``sensor/<sensor>/<name>``):
+    the problem of a refused extension, or, for a registered one, that its YAML is not on the search
+    path (:mod:`quadest.config.registry`); ``None`` for a name no registry knows. A sensor's options
+    sit in a group of their own, which Hydra lists when it finds the group (``group_found``)."""
+    registries = {
+        "estimator": discover_estimators,
+        "model": discover_models,
+        "scenario": discover_scenarios,
+        "sensor": discover_sensors,
+    }
+    kind, _, sensor = group.removeprefix("schema/").partition("/")
+    if kind not in registries or (kind == "sensor") != bool(sensor):
+        return None
+    found, extension = registries[kind](), sensor or name
+    if extension in found.problems and extension not in found.usable:
+        return found.problems[extension]
+    if extension in found.usable and (group == kind or (group == f"sensor/{sensor}" and not group_found)):
+        return missing_yaml(found, extension, f"{group}/{name}.yaml")
+    return None
 
 
 def sensor_schema() -> type:
@@ -164,7 +193,7 @@ def model_default(model_name: str, key: str, fallback: float) -> float:
     """``${model_default:${model.name},KEY,FALLBACK}`` in ``conf/config.yaml``: the model option's
     own default of the job key ``KEY`` (:attr:`~quadest.simulation.spec.ModelSpec.job_defaults`),
     else ``FALLBACK``; an experiment or a command-line value replaces the whole interpolation."""
-    spec = discover_models()[0].get(model_name)
+    spec = discover_models().usable.get(model_name)
     return float(spec.job_defaults.get(key, fallback)) if spec is not None else float(fallback)
 
 
@@ -173,13 +202,16 @@ def register_schemas() -> None:
     OmegaConf.register_new_resolver("model_default", model_default, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="experiment_schema", node=ExperimentConf)
-    models, broken = discover_models()
-    for name, spec in models.items():
+    models = discover_models()
+    for name, spec in models.usable.items():
         cs.store(group="schema/model", name=name, node=spec.schema)
-    for name in set(broken) - set(models):  # composes, so that the pre-run check names the problem
+    for name in set(models.problems) - set(models.usable):  # composes, so that the pre-run check names the problem
         cs.store(group="schema/model", name=name, node={"name": name})
     cs.store(group="schema/sensor", name="sensor", node=sensor_schema())
-    for name, cls in SCENARIOS.items():
+    for name, cls in discover_scenarios().usable.items():
         cs.store(group="schema/scenario", name=name, node=cls)
-    for name, spec in builtin_estimators().items():
+    estimators = discover_estimators()
+    for name, spec in estimators.usable.items():
         cs.store(group="schema/estimator", name=name, node=spec.params)
+    for name in set(estimators.problems) - set(estimators.usable):  # as a refused model's
+        cs.store(group="schema/estimator", name=name, node={"kind": name})

@@ -29,7 +29,7 @@ from quadest.app.schema import ExperimentConf, SensorConf, is_auto
 from quadest.cache.keys import module_digest, plugin_digest, resolved_data_key
 from quadest.config.settings import DataSettings
 from quadest.sensors.base import Sensor
-from quadest.sensors.registry import discover as discover_sensors
+from quadest.sensors.registry import sensor_classes
 from quadest.simulation.registry import model_spec
 
 
@@ -96,7 +96,7 @@ def aiding_settings(cfg: DictConfig) -> dict[str, Any]:
     """Each registered sensor of ``cfg.model.aiding`` → an instance of its ``Settings`` from its
     settings node (``sensor.<name>`` or its ``settings_key``; ``None`` if the config has none).
     An unknown or broken sensor is left out: :func:`quadest.simulation.aiding.validate_aiding` names it."""
-    sensors = discover_sensors()[0]
+    sensors = sensor_classes()
     names = list(cfg.model.get("aiding") or []) if isinstance(cfg.model, DictConfig) else []
     return {name: sensor_settings(cfg, sensors[name]) for name in names if name in sensors}
 
@@ -142,7 +142,7 @@ def plugin_digests(cfg: DictConfig) -> dict[str, str | None]:
     modules = {getattr(spec.build, "__module__", None) or spec.schema.__module__, spec.schema.__module__}
     digests = {module_digest(m) for m in modules}
     found: dict[str, str | None] = {"model": None if None in digests else "".join(sorted(digests))}
-    sensors = discover_sensors()[0]
+    sensors = sensor_classes()
     for name in list(cfg.model.get("aiding") or []) if isinstance(cfg.model, DictConfig) else []:
         if name in sensors:
             found[f"sensor.{name}"] = plugin_digest(sensors[name])

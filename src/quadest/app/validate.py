@@ -22,14 +22,15 @@ from quadest.config.ranges import require_non_negative, require_positive
 from quadest.config.settings import DataSettings
 from quadest.errors import ConfigError
 from quadest.estimators.params import parameter_problem
-from quadest.estimators.registry import builtin_estimators, report_plugin_problems, resolve
+from quadest.estimators.registry import discover as discover_estimators
+from quadest.estimators.registry import resolve
 from quadest.estimators.smoother_settings import smoother_settings
 from quadest.evaluation.objective import validate_objective
 from quadest.numerics.square_root import requested_kernels
-from quadest.quadrotor.scenarios import SCENARIOS
+from quadest.quadrotor.scenario_registry import discover as discover_scenarios
 from quadest.replay.data import PX4_ROW, validate_replay
 from quadest.sensors.noise_laws import check_noise_law
-from quadest.simulation.aiding import report_plugin_problems as report_sensor_problems
+from quadest.sensors.registry import discover as discover_sensors
 from quadest.simulation.registry import model_spec, state_dimension
 
 
@@ -59,7 +60,7 @@ def validate_run(experiment: ExperimentConf) -> None:
 
 def validate_model(settings: DataSettings) -> None:
     spec = model_spec(settings.model.name)  # an unknown name or a broken plugin: one line
-    report_sensor_problems(list(getattr(settings.model, "aiding", None) or []))
+    discover_sensors().refuse_selected(getattr(settings.model, "aiding", None) or [], key="model.aiding")
     spec.validate(settings)
     if spec.uses_quadrotor_groups:
         validate_sensor(settings)
@@ -90,20 +91,18 @@ def validate_sensor(settings: DataSettings) -> None:
 
 def validate_scenario(settings: DataSettings) -> None:
     sc = settings.scenario
-    if sc.name not in SCENARIOS:
-        raise ConfigError("scenario.name", sc.name, f"one of {sorted(SCENARIOS)}")
-    require_non_negative("scenario.initial_position_std", sc.initial_position_std)
-    require_positive("scenario.altitude", sc.altitude)
-    require_non_negative("scenario.takeoff_time", sc.takeoff_time)
-    for key in ("period", "spin_up_time", "transition_time", "approach_time"):
-        if hasattr(sc, key):
-            require_positive(f"scenario.{key}", getattr(sc, key))
+    found = discover_scenarios()
+    found.refuse_selected([sc.name], key="scenario.name")
+    if sc.name not in found.usable:
+        raise ConfigError("scenario.name", sc.name, f"one of {sorted(found.usable)}")
+    sc.validate()
 
 
 def validate_estimators(experiment: ExperimentConf, settings: DataSettings) -> None:
     if not experiment.estimator:
-        raise ConfigError("estimator", "[]", f"select at least one of {sorted(builtin_estimators())}")
-    report_plugin_problems({node.get("kind", label) for label, node in experiment.estimator.items()})
+        raise ConfigError("estimator", "[]", f"select at least one of {sorted(discover_estimators().usable)}")
+    selected = {node.get("kind", label) for label, node in experiment.estimator.items()}
+    discover_estimators().refuse_selected(selected, key="estimator")
     n = state_dimension(settings)
     for label, node in experiment.estimator.items():
         cls, params = resolve(label, node)

@@ -33,7 +33,7 @@ class DataSettings:
         sensor: the ``sensor`` node, a :class:`quadest.app.schema.SensorConf` (MIMU, encoders and
             the built-in navigation sensors; a plugin sensor's settings are in ``aiding``).
         scenario: the ``scenario`` node, an instance of its class in
-            :data:`quadest.quadrotor.scenarios.SCENARIOS` (a model that flies no quadrotor ignores it).
+            :func:`quadest.quadrotor.scenario_registry.scenario_classes` (a model that flies no quadrotor ignores it).
         loop: ``open``, ``truth``, ``measured`` or ``estimate`` (docs/closed-loop.md).
         closed_loop: the closed loop's settings.
         source: the ``source`` node (:class:`quadest.app.schema.SourceConf`), ``None`` to simulate.

@@ -10,8 +10,10 @@ Three sources, all behind the same contract (``docs/plugins.md``):
 3. **From a config only**: an ``estimator.<label>`` node with ``_target_`` naming any importable
    class that meets the contract.
 
-A plugin that fails to import, breaks the contract or reuses a built-in name never takes
-quadest down: it is reported with one line naming the plugin, and refused if selected.
+The first two are found by the one registry of every extension kind
+(:mod:`quadest.config.registry`): an estimator of either that fails to import, breaks the
+contract or shares its name with another never takes quadest down; it is reported with one line
+naming it and the reason, and refused if selected.
 """
 
 from __future__ import annotations
@@ -19,15 +21,14 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import inspect
-import pkgutil
-import sys
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from functools import cache
-from importlib.metadata import entry_points
+from types import ModuleType
 from typing import Any
 
-from quadest.errors import ConfigError, PluginError
+from quadest.config.registry import ExtensionKind, Found, scan
+from quadest.errors import ConfigError
 from quadest.estimators.base import CAPABILITIES, Estimator, PerRunAdapter, SingleRunEstimator
 from quadest.estimators.params import RESERVED_KEYS
 from quadest.estimators.smoother_settings import with_smoother_keys
@@ -67,64 +68,48 @@ def contract_problems(cls: Any) -> list[str]:
     return problems
 
 
-def _builtin_specs() -> dict[str, EstimatorSpec]:
-    import quadest.estimators as package
+def registry_problems(cls: Any) -> list[str]:
+    """What keeps ``cls`` from being a registered estimator: the contract, and a ``Params``
+    dataclass (only a ``_target_`` class may go without one)."""
+    problems = contract_problems(cls)
+    if getattr(cls, "Params", None) is None:
+        problems.append("it must define Params, the dataclass of its config parameters")
+    return problems
 
-    specs: dict[str, EstimatorSpec] = {}
-    for info in pkgutil.iter_modules(package.__path__):
-        module = importlib.import_module(f"{package.__name__}.{info.name}")
-        for _, cls in inspect.getmembers(module, inspect.isclass):
-            name = cls.__dict__.get("config_name")
-            if cls.__module__ == module.__name__ and name and not contract_problems(cls):
-                source = f"{module.__name__}.{cls.__name__}"
-                specs[name] = EstimatorSpec(name, cls, with_smoother_keys(cls.Params), source)
-    return specs
+
+def _declared(module: ModuleType) -> Iterator[tuple[str, str, type]]:
+    """The classes ``module`` defines that set their own ``config_name``."""
+    for attribute, cls in inspect.getmembers(module, inspect.isclass):
+        name = cls.__dict__.get("config_name")
+        if cls.__module__ == module.__name__ and name:
+            yield name, attribute, cls
+
+
+ESTIMATORS = ExtensionKind(
+    kind="estimator",
+    package="quadest.estimators",
+    group=ENTRY_POINT_GROUP,
+    declared=_declared,
+    problems_of=registry_problems,
+    make=lambda name, cls, origin: EstimatorSpec(name, cls, with_smoother_keys(cls.Params), origin),
+)
 
 
 @cache
-def discover() -> tuple[dict[str, EstimatorSpec], dict[str, str]]:
-    """All usable estimators by config name, and one-line problems of the plugins that are not."""
-    specs = _builtin_specs()
-    problems: dict[str, str] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        where = f"entry point '{ep.name} = {ep.value}'" + (f" of {ep.dist.name}" if ep.dist else "")
-        if ep.name in specs and specs[ep.name].source.startswith("quadest."):
-            problems[ep.name] = (
-                f"estimator plugin {where} collides with the built-in estimator '{ep.name}'; rename the entry point"
-            )
-            continue
-        try:
-            cls = ep.load()
-        except Exception as exc:  # a broken third-party package must not take quadest down
-            problems[ep.name] = f"estimator plugin {where} failed to import: {type(exc).__name__}: {exc}"
-            continue
-        issues = contract_problems(cls)
-        if getattr(cls, "Params", None) is None:
-            issues.append("it must define Params, the dataclass of its config parameters")
-        if issues:
-            problems[ep.name] = f"estimator plugin {where} does not meet the contract: {'; '.join(issues)}"
-            continue
-        specs[ep.name] = EstimatorSpec(ep.name, cls, with_smoother_keys(cls.Params), where)
-    return specs, problems
+def discover() -> Found:
+    """Every estimator, the package's own and the installed plugins', with the one-line problems
+    of those refused (:mod:`quadest.config.registry`)."""
+    return scan(ESTIMATORS)
+
+
+def estimator_specs() -> dict[str, EstimatorSpec]:
+    """Every usable estimator by config name: the package's own and the installed plugins'."""
+    return discover().usable
 
 
 def builtin_estimators() -> dict[str, EstimatorSpec]:
-    """Every usable estimator by config name: the package's own and the installed plugins'."""
-    return discover()[0]
-
-
-_warned: set[str] = set()
-
-
-def report_plugin_problems(selected: set[str]) -> None:
-    """Refuse a selected broken plugin; mention the others once per process on stderr."""
-    specs, problems = discover()
-    for name, message in problems.items():
-        if name in selected and name not in specs:
-            raise PluginError(name, message)
-        if message not in _warned:
-            _warned.add(message)
-            print(f"quadest: warning: {message}", file=sys.stderr)
+    """The package's own usable estimators by config name, without any installed plugin."""
+    return discover().builtins()
 
 
 def estimator_parameters(node: Mapping[str, Any]) -> dict[str, Any]:
@@ -158,11 +143,12 @@ def resolve(label: str, node: Mapping[str, Any]) -> tuple[type, dict[str, Any]]:
             )
         schema = getattr(cls, "Params", None)
     else:
-        specs, problems = discover()
+        found = discover()
         kind = node.get("kind", label)
-        if kind not in specs:
-            raise ConfigError(f"estimator.{label}.kind", kind, problems.get(kind, f"one of {sorted(specs)}"))
-        cls, schema = specs[kind].cls, specs[kind].params
+        if kind not in found.usable:
+            allowed = found.problems.get(kind, f"one of {sorted(found.usable)}")
+            raise ConfigError(f"estimator.{label}.kind", kind, allowed)
+        cls, schema = found.usable[kind].cls, found.usable[kind].params
     if schema is not None:
         fields = {f.name for f in dataclasses.fields(schema)} - set(RESERVED_KEYS)
         unknown = sorted(set(params) - fields)

@@ -10,7 +10,8 @@ import numpy as np
 
 from quadest.quadrotor.controller import BacksteppingGains
 from quadest.quadrotor.params import QuadrotorParams
-from quadest.quadrotor.scenarios import SCENARIOS, Scenario
+from quadest.quadrotor.scenario_registry import scenario_classes
+from quadest.quadrotor.scenarios import Scenario
 from quadest.sensors.mimu import TriadSpec
 
 
@@ -43,7 +44,7 @@ def controller_gains(controller: Any) -> BacksteppingGains:
 
 def scenario(settings: Any) -> Scenario:
     """A fresh scenario object of the ``scenario`` settings (an instance of its schema class)."""
-    scenario_cls = SCENARIOS[settings.name]
+    scenario_cls = scenario_classes()[settings.name]
     return scenario_cls(**{k: getattr(settings, k) for k in scenario_cls.__dataclass_fields__})
 
 

@@ -1,5 +1,6 @@
 """Reference trajectories the controller flies: ``hover``, ``attitude_steps``, ``figure8`` and
-``platform_approach``.
+``platform_approach``, found with any other scenario by :mod:`quadest.quadrotor.scenario_registry`
+(docs/scenarios.md).
 
 Every scenario starts at rest on the ground at the origin, with the rotors at hover speed, and
 takes off smoothly to its altitude. References are smooth (quintic transitions), so the
@@ -11,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from quadest.config.ranges import require_non_negative, require_positive
 
 
 @dataclass
@@ -55,6 +58,13 @@ class Scenario:
     altitude: float = 1.0
     takeoff_time: float = 3.0
 
+    def validate(self, prefix: str = "scenario") -> None:
+        """Raise :class:`~quadest.errors.ConfigError` naming the first key out of range, before any
+        work (``prefix``: where the node sits); a scenario with keys of its own extends it."""
+        require_non_negative(f"{prefix}.initial_position_std", self.initial_position_std)
+        require_positive(f"{prefix}.altitude", self.altitude)
+        require_non_negative(f"{prefix}.takeoff_time", self.takeoff_time)
+
     def _takeoff(self, t: float) -> tuple[float, float, float]:
         s, ds, dds = smooth_step(t, 0.0, self.takeoff_time)
         return self.altitude * s, self.altitude * ds, self.altitude * dds
@@ -96,6 +106,10 @@ class AttitudeSteps(Scenario):
         ]
     )  # fmt: skip
 
+    def validate(self, prefix: str = "scenario") -> None:
+        super().validate(prefix)
+        require_positive(f"{prefix}.transition_time", self.transition_time)
+
     def reference(self, t: float) -> Reference:
         ref = super().reference(t)
         angle, rate, accel = np.zeros(3), np.zeros(3), np.zeros(3)
@@ -128,6 +142,11 @@ class Figure8(Scenario):
     yaw_amplitude_deg: float = 30.0
     period: float = 6.0
     spin_up_time: float = 3.0
+
+    def validate(self, prefix: str = "scenario") -> None:
+        super().validate(prefix)
+        require_positive(f"{prefix}.period", self.period)
+        require_positive(f"{prefix}.spin_up_time", self.spin_up_time)
 
     def _phase(self, t: float) -> tuple[float, float, float]:
         w = 2.0 * np.pi / self.period
@@ -184,6 +203,10 @@ class PlatformApproach(Scenario):
     final_height: float = 2.0
     approach_time: float = 30.0
 
+    def validate(self, prefix: str = "scenario") -> None:
+        super().validate(prefix)
+        require_positive(f"{prefix}.approach_time", self.approach_time)
+
     def platform_position(self, t: np.ndarray | float) -> np.ndarray:
         """The platform's reference point (..., 3) at times ``t`` (...)."""
         t = np.asarray(t, dtype=float)[..., None]
@@ -198,11 +221,3 @@ class PlatformApproach(Scenario):
         ref.position = ref.position + s * gap
         ref.velocity = ref.velocity + ds * gap + s * gap_rate
         return ref
-
-
-SCENARIOS: dict[str, type[Scenario]] = {
-    "hover": Hover,
-    "attitude_steps": AttitudeSteps,
-    "figure8": Figure8,
-    "platform_approach": PlatformApproach,
-}

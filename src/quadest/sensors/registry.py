@@ -7,52 +7,57 @@ found (docs/sensors.md):
    the sensor's ``config_name`` and whose value is the class
    (``"rangefinder = mypkg.rangefinder:Rangefinder"``).
 
-A plugin that fails to import, breaks the contract, is named unlike its entry point or reuses a
-built-in name never takes quadest down: it is reported with one line naming the plugin, and
-refused if selected.
+Both are found by the one registry of every extension kind (:mod:`quadest.config.registry`): a
+sensor of either that fails to import, breaks the contract, is named unlike its entry point or
+shares its name with another never takes quadest down; it is reported with one line naming it
+and the reason, and refused if selected.
 """
 
 from __future__ import annotations
 
-import importlib
 import inspect
-import pkgutil
+from collections.abc import Iterator
 from functools import cache
+from types import ModuleType
 
-from quadest.config.plugin_entry_points import load_entry_points
+from quadest.config.registry import ExtensionKind, Found, scan
 from quadest.sensors.base import Sensor, sensor_problems
 
 ENTRY_POINT_GROUP = "quadest.sensors"
 
 
-def _builtin_sensors() -> dict[str, type[Sensor]]:
-    import quadest.sensors as package
+def _declared(module: ModuleType) -> Iterator[tuple[str, str, type]]:
+    """The classes ``module`` defines that set their own ``config_name``."""
+    for attribute, cls in inspect.getmembers(module, inspect.isclass):
+        if cls.__module__ == module.__name__ and "config_name" in cls.__dict__:
+            yield cls.config_name, attribute, cls
 
-    found: dict[str, type[Sensor]] = {}
-    for info in pkgutil.iter_modules(package.__path__):
-        module = importlib.import_module(f"{package.__name__}.{info.name}")
-        for _, cls in inspect.getmembers(module, inspect.isclass):
-            if cls.__module__ == module.__name__ and "config_name" in cls.__dict__ and not sensor_problems(cls):
-                if found.setdefault(cls.config_name, cls) is not cls:
-                    raise RuntimeError(f"two built-in sensors are named {cls.config_name!r}")
-    return found
+
+SENSORS = ExtensionKind(
+    kind="sensor",
+    package="quadest.sensors",
+    group=ENTRY_POINT_GROUP,
+    declared=_declared,
+    problems_of=sensor_problems,
+    name_of=lambda cls: cls.config_name,
+)
 
 
 @cache
-def discover() -> tuple[dict[str, type[Sensor]], dict[str, str]]:
-    """All usable sensors by name, and one-line problems of the plugins that are not."""
-    return load_entry_points(
-        ENTRY_POINT_GROUP,
-        "sensor",
-        dict(sorted(_builtin_sensors().items())),
-        sensor_problems,
-        lambda cls: cls.config_name,
-    )
+def discover() -> Found:
+    """Every sensor, the package's own and the installed plugins', with the one-line problems of
+    those refused (:mod:`quadest.config.registry`)."""
+    return scan(SENSORS)
 
 
 def sensor_classes() -> dict[str, type[Sensor]]:
     """Every usable sensor by name: the package's own and the installed plugins'."""
-    return discover()[0]
+    return discover().usable
+
+
+def builtin_sensor_classes() -> dict[str, type[Sensor]]:
+    """The package's own usable sensors by name, without any installed plugin."""
+    return discover().builtins()
 
 
 def is_builtin(cls: type[Sensor]) -> bool:

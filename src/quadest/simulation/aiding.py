@@ -4,7 +4,8 @@ from the config, their checks, their samples and the filters' models of them (do
 Every sensor goes through the same three calls, so no model knows a sensor by name:
 
 - :func:`validate_aiding`: the names are registered sensors (:mod:`quadest.sensors.registry`),
-  each at most once; a broken plugin is refused with its one line; the model offers every
+  each at most once; a broken sensor, or one of two with one name, is refused with its one line
+  (:meth:`quadest.config.registry.Found.refuse_selected`); the model offers every
   quantity the sensor measures; the sensor's own checks of its settings;
 - :func:`measure_aiding`: each sensor, in ``model.aiding`` order, simulates its samples of the
   truth from its own random streams (a built-in's from :data:`~quadest.montecarlo.streams.STREAMS`
@@ -20,17 +21,14 @@ the config (:func:`quadest.app.settings.aiding_settings`) into
 
 from __future__ import annotations
 
-import sys
 from typing import Any
 
 from quadest.config.settings import DataSettings
-from quadest.errors import ConfigError, PluginError
+from quadest.errors import ConfigError
 from quadest.montecarlo.streams import named_streams
 from quadest.sensors.base import Sensor, SensorContext, SensorModel, StateLayout, TrueMotion
 from quadest.sensors.record import SensorRecord
 from quadest.sensors.registry import discover, is_builtin
-
-_warned: set[str] = set()
 
 
 def sensor_settings(settings: DataSettings, name: str) -> Any:
@@ -53,24 +51,13 @@ def sensor_context(settings: DataSettings, calibrated: bool, noise_inflation: fl
     )
 
 
-def report_plugin_problems(selected: list[str]) -> None:
-    """Refuse a selected broken sensor plugin; mention the others once per process on stderr
-    (as :func:`quadest.estimators.registry.report_plugin_problems`)."""
-    sensors, problems = discover()
-    for name, message in problems.items():
-        if name in selected and name not in sensors:
-            raise PluginError(name, message, key="model.aiding")
-        if message not in _warned:
-            _warned.add(message)
-            print(f"quadest: warning: {message}", file=sys.stderr)
-
-
 def _selected(settings: DataSettings) -> dict[str, type[Sensor]]:
     """The sensor classes of ``model.aiding`` in order; one-line errors for unknown, repeated or
     broken ones."""
     names = list(settings.model.aiding)
-    report_plugin_problems(names)
-    sensors = discover()[0]
+    found = discover()
+    found.refuse_selected(names, key="model.aiding")
+    sensors = found.usable
     for name in names:
         if name not in sensors or names.count(name) > 1:
             raise ConfigError("model.aiding", names, f"distinct names from {sorted(sensors)}")

@@ -9,67 +9,59 @@ Two sources behind the same contract (docs/models.md), as for estimators (docs/p
 2. **From an installed package**: an entry point in the group ``quadest.models`` whose name is the
    option's name and whose value is its spec (``"pendulum = mypkg.pendulum:MODEL"``).
 
-A plugin that fails to import, is not a usable spec, is named unlike its entry point or reuses a
-built-in name never takes quadest down: it is reported with one line naming the plugin, and
-refused if selected (:func:`report_plugin_problems`).
+Both are found by the one registry of every extension kind (:mod:`quadest.config.registry`): a
+model of either that fails to import, is not a usable spec, is named unlike its entry point or
+shares its name with another never takes quadest down; it is reported with one line naming it
+and the reason, and refused if selected.
 """
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
-import sys
+from collections.abc import Iterator
 from functools import cache
+from types import ModuleType
 
-from quadest.config.plugin_entry_points import load_entry_points
+from quadest.config.registry import ExtensionKind, Found, scan
 from quadest.config.settings import DataSettings
-from quadest.errors import ConfigError, PluginError
+from quadest.errors import ConfigError
 from quadest.montecarlo import MonteCarloData
 from quadest.simulation.spec import ModelSpec, spec_problems
 
 ENTRY_POINT_GROUP = "quadest.models"
 
 
-def _builtin_specs() -> dict[str, ModelSpec]:
-    import quadest.simulation as package
+def _declared(module: ModuleType) -> Iterator[tuple[str, str, ModelSpec]]:
+    """The module-level model specs of ``module``."""
+    for attribute, value in vars(module).items():
+        if isinstance(value, ModelSpec):
+            yield value.name, attribute, value
 
-    specs: dict[str, ModelSpec] = {}
-    for info in pkgutil.iter_modules(package.__path__):
-        module = importlib.import_module(f"{package.__name__}.{info.name}")
-        for value in vars(module).values():
-            if isinstance(value, ModelSpec) and not spec_problems(value):
-                if specs.get(value.name, value) is not value:
-                    raise RuntimeError(f"two built-in models are named {value.name!r}")
-                specs[value.name] = value
-    return specs
+
+MODELS = ExtensionKind(
+    kind="model",
+    package="quadest.simulation",
+    group=ENTRY_POINT_GROUP,
+    declared=_declared,
+    problems_of=spec_problems,
+    name_of=lambda spec: spec.name,
+)
 
 
 @cache
-def discover() -> tuple[dict[str, ModelSpec], dict[str, str]]:
-    """All usable model options by name, and one-line problems of the plugins that are not."""
-    return load_entry_points(
-        ENTRY_POINT_GROUP, "model", dict(sorted(_builtin_specs().items())), spec_problems, lambda spec: spec.name
-    )
+def discover() -> Found:
+    """Every model option, the package's own and the installed plugins', with the one-line
+    problems of those refused (:mod:`quadest.config.registry`)."""
+    return scan(MODELS)
 
 
 def model_specs() -> dict[str, ModelSpec]:
     """Every usable model option by name: the package's own and the installed plugins'."""
-    return discover()[0]
+    return discover().usable
 
 
-_warned: set[str] = set()
-
-
-def report_plugin_problems(selected: str) -> None:
-    """Refuse the selected model if it is a broken plugin; mention the other broken plugins once
-    per process on stderr."""
-    specs, problems = discover()
-    for name, message in problems.items():
-        if name == selected and name not in specs:
-            raise PluginError(name, message, key="model.name")
-        if message not in _warned:
-            _warned.add(message)
-            print(f"quadest: warning: {message}", file=sys.stderr)
+def builtin_model_specs() -> dict[str, ModelSpec]:
+    """The package's own usable model options by name, without any installed plugin."""
+    return discover().builtins()
 
 
 def model_spec(name: str) -> ModelSpec:
@@ -78,7 +70,7 @@ def model_spec(name: str) -> ModelSpec:
     Raises:
         ConfigError: an unknown name (the message lists the options), or a broken plugin's.
     """
-    report_plugin_problems(name)
+    discover().refuse_selected([name], key="model.name")
     specs = model_specs()
     if name not in specs:
         raise ConfigError("model.name", name, f"one of {sorted(specs)}")
