@@ -3,11 +3,14 @@
 
 - :func:`check_estimator`, :func:`check_sigma_point_moments`: an estimator class against the
   Kalman filter on a linear-Gaussian model and against closed-form moments of quadratics
-  (:mod:`quadest.conformance.estimators`).
+  (:mod:`quadest.conformance.estimators`);
+- :func:`compose_config`, :func:`compose_settings`: a config as the ``quadest`` command composes
+  it, for a plugin's tests (:mod:`quadest.conformance.compose`).
 
 Each check raises ``AssertionError`` naming the first check that fails.
 """
 
+from quadest.conformance.compose import compose_config, compose_settings
 from quadest.conformance.estimators import (
     Quadratic,
     check_estimator,
@@ -20,6 +23,8 @@ __all__ = [
     "Quadratic",
     "check_estimator",
     "check_sigma_point_moments",
+    "compose_config",
+    "compose_settings",
     "linear_gaussian_problem",
     "quadratic_moments",
 ]
