@@ -62,6 +62,7 @@ LAYERS: dict[str, str] = {
     "test_closed_loop.py": "unit",
     "test_compact_aggregate.py": "integration",
     "test_conformance_nonlinear.py": "unit",
+    "test_conformance_sensors.py": "unit",
     "test_consistency_bands.py": "integration",
     "test_cross_job.py": "unit",
     "test_doc_numbers.py": "hygiene",

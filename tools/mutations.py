@@ -1614,6 +1614,32 @@ MUTATIONS += (  # the ledger's narrow windows and a model's own job defaults
     ),
 )  # fmt: skip
 
+SENSOR_KIT = "tests/test_conformance_sensors.py::test_a_broken_sensor_fails_on_its_bug"
+
+MUTATIONS += (  # the conformance kit's own checks (quadest.conformance.check_sensor)
+    Mutation(
+        "check_sensor's Jacobian tolerance ignored",
+        "src/quadest/conformance/sensors.py",
+        "tol = jacobian_tolerance(y, J_fd, filter_model.fd_step)",
+        "tol = np.inf",
+        (SENSOR_KIT + "[WrongJacobian-jacobian differs from central differences]",),
+    ),
+    Mutation(
+        "check_sensor blind to draws from numpy's global generator",
+        "src/quadest/conformance/sensors.py",
+        "    after = np.random.get_state()",
+        "    after = state",
+        (SENSOR_KIT + "[GlobalDraws-global generator]",),
+    ),
+    Mutation(
+        "check_sensor comparing only run 0 of a batch with the run alone",
+        "src/quadest/conformance/sensors.py",
+        "for i in range(runs):",
+        "for i in range(1):",
+        (SENSOR_KIT + "[OneGenerator-run 1 in a batch differs from run 1 alone]",),
+    ),
+)  # fmt: skip
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""

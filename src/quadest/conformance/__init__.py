@@ -4,6 +4,8 @@
 - :func:`check_estimator`, :func:`check_sigma_point_moments`: an estimator class against the
   Kalman filter on a linear-Gaussian model and against closed-form moments of quadratics
   (:mod:`quadest.conformance.estimators`);
+- :func:`check_sensor`: a sensor class's samples, stream isolation, availability and Jacobian
+  against finite differences on the INS's manifold (:mod:`quadest.conformance.sensors`);
 - :func:`compose_config`, :func:`compose_settings`: a config as the ``quadest`` command composes
   it, for a plugin's tests (:mod:`quadest.conformance.compose`).
 
@@ -18,10 +20,12 @@ from quadest.conformance.estimators import (
     linear_gaussian_problem,
     quadratic_moments,
 )
+from quadest.conformance.sensors import check_sensor
 
 __all__ = [
     "Quadratic",
     "check_estimator",
+    "check_sensor",
     "check_sigma_point_moments",
     "compose_config",
     "compose_settings",
