@@ -61,6 +61,7 @@ LAYERS: dict[str, str] = {
     "test_cli.py": "integration",
     "test_closed_loop.py": "unit",
     "test_compact_aggregate.py": "integration",
+    "test_conformance_models.py": "unit",
     "test_conformance_nonlinear.py": "unit",
     "test_conformance_sensors.py": "unit",
     "test_consistency_bands.py": "integration",

@@ -6,6 +6,8 @@
   (:mod:`quadest.conformance.estimators`);
 - :func:`check_sensor`: a sensor class's samples, stream isolation, availability and Jacobian
   against finite differences on the INS's manifold (:mod:`quadest.conformance.sensors`);
+- :func:`check_model`: a model's shapes, analytic Jacobians against (manifold) finite
+  differences and batch selection (:mod:`quadest.conformance.models`);
 - :func:`compose_config`, :func:`compose_settings`: a config as the ``quadest`` command composes
   it, for a plugin's tests (:mod:`quadest.conformance.compose`).
 
@@ -20,11 +22,13 @@ from quadest.conformance.estimators import (
     linear_gaussian_problem,
     quadratic_moments,
 )
+from quadest.conformance.models import check_model
 from quadest.conformance.sensors import check_sensor
 
 __all__ = [
     "Quadratic",
     "check_estimator",
+    "check_model",
     "check_sensor",
     "check_sigma_point_moments",
     "compose_config",
