@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from plugin_site import fenced_blocks
 from quadest.conformance import check_model
 from quadest.models.base import FilterModel
 from quadest.simulation.registry import model_specs
@@ -103,3 +104,17 @@ def test_a_broken_model_fails_on_its_bug(cls, message):
 def test_a_bare_filter_model_needs_its_states():
     with pytest.raises(ValueError, match="needs its states"):
         check_model(_problem(Drift)[0])
+
+
+@pytest.mark.slow
+def test_the_kit_example_of_the_plugins_page_runs():
+    """The first block of docs/plugins.md's "Conformance" section, executed as written: every test
+    it defines passes."""
+    text = fenced_blocks("plugins.md")
+    block = next(b for b in text if "from quadest.conformance import check_estimator, check_model" in b)
+    namespace: dict = {}
+    exec(compile(block, "docs/plugins.md", "exec"), namespace)
+    tests = [fn for name, fn in namespace.items() if name.startswith("test_")]
+    assert len(tests) == 4
+    for test in tests:
+        test()
