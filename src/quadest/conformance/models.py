@@ -40,9 +40,9 @@ vectorised reduction sums (a few ulps of the largest value)."""
 def _flight(spec: ModelSpec, overrides: Sequence[str], runs: int, seed: int):
     """The filter model of ``quadest model=<name>`` and ``(x, u)`` mid-flight and at the last
     step: true states and the inputs the filters receive (measured input and companions). Not
-    the start: a vehicle at rest can sit where a model is not differentiable (a MIMU error model
-    with a different scale factor on each side of zero, at zero horizontal specific force), where
-    central differences mean nothing."""
+    the start: a vehicle at rest can sit where a model is not differentiable (the MIMU's
+    scale-factor asymmetry ``a·sgn(y)·y`` at zero horizontal specific force), where central
+    differences mean nothing."""
     data = spec.build(compose_settings([f"model={spec.name}", f"runs={runs}", f"seed={seed}", *overrides]))
     model, K = data.model, data.time.size - 1
     points = [
