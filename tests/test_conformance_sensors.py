@@ -1,5 +1,5 @@
-"""``quadest.conformance.check_sensor``: every built-in sensor and the rangefinder of docs/sensors.md
-pass it; a sensor with a wrong Jacobian, one drawing from numpy's global generator, one drawing
+"""``quadest.conformance.check_sensor``: every built-in sensor and the plugin sensors of
+docs/sensors.md pass it; a sensor with a wrong Jacobian, one drawing from numpy's global generator, one drawing
 every run from one generator, one ignoring its streams and one sampling off its rate each fail it,
 on the check that names their bug."""
 
@@ -18,15 +18,17 @@ from quadest.sensors.record import SensorRecord
 from quadest.sensors.registry import sensor_classes
 
 
-def _rangefinder_module():
-    spec = importlib.util.spec_from_file_location("conformance_rangefinder", PLUGINS / "rangefinder_sensor.py")
+def _plugin_module(name: str):
+    """``tests/plugins/<name>.py``, loaded under a name of its own (the plugin tests import it
+    from their fake site)."""
+    spec = importlib.util.spec_from_file_location(f"conformance_{name}", PLUGINS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # its dataclasses look their module up
     spec.loader.exec_module(module)
     return module
 
 
-rangefinder = _rangefinder_module()
+rangefinder = _plugin_module("rangefinder_sensor")
 Rangefinder = rangefinder.Rangefinder
 
 
@@ -37,8 +39,10 @@ def test_every_builtin_sensor_conforms(name):
 
 
 @pytest.mark.slow
-def test_the_rangefinder_of_the_docs_conforms():
+def test_the_plugin_sensors_of_the_docs_conform():
+    """The rangefinder of docs/sensors.md and the velocity sensor its quadrotor section names."""
     check_sensor(Rangefinder)
+    check_sensor(_plugin_module("velocimeter_sensor").Velocimeter)
 
 
 @dataclass
