@@ -3,12 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 
-from quadest.app.schema import register_schemas
-from quadest.app.settings import data_settings
-from quadest.config.paths import config_dir
+from quadest import conformance
 from quadest.config.settings import DataSettings
 from quadest.estimators.base import Estimator
 from quadest.models.base import FilterModel
@@ -74,14 +70,10 @@ def simulate(model: FilterModel, x0: np.ndarray, steps: int, seed: int):
 
 
 def compose_config(overrides: list[str] | None = None):
-    """The composed root config, as the CLI would see it."""
-    register_schemas()
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
-        return compose(config_name="config", overrides=list(overrides or []))
+    """The composed root config, as the CLI would see it, unchecked: tests hand it refused values."""
+    return conformance.compose_config(overrides, checked=False)
 
 
 def compose_settings(overrides: list[str] | None = None) -> DataSettings:
-    """The typed data settings of the composed root config: what a data builder takes
-    (:func:`quadest.app.settings.data_settings`)."""
-    return data_settings(compose_config(overrides))
+    """The typed data settings of the composed root config, unchecked: what a data builder takes."""
+    return conformance.compose_settings(overrides, checked=False)

@@ -124,7 +124,7 @@ def test_bad_parameters_are_refused(name, params):
 
 
 def test_a_model_that_is_not_the_attitude_model_is_refused():
-    from quadest.testing import linear_gaussian_problem
+    from quadest.conformance import linear_gaussian_problem
 
     with pytest.raises(ValueError, match="attitude model"):
         AhrsMadgwick(linear_gaussian_problem()[0])

@@ -1,4 +1,4 @@
-"""``quadest.testing.check_sigma_point_moments``: the closed-form UT and Gaussian moments of a
+"""``quadest.conformance.check_sigma_point_moments``: the closed-form UT and Gaussian moments of a
 quadratic, the real sigma-point filters pass, and a UKF with one classic bug each is refused.
 
 ``PlainUKF`` is a covariance-form UKF written here from the textbook (Julier & Uhlmann 2004),
@@ -15,12 +15,12 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
+from quadest.conformance import Quadratic, check_estimator, check_sigma_point_moments, quadratic_moments
 from quadest.estimators.base import Estimator
 from quadest.estimators.cubature import CKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
 from quadest.estimators.registry import builtin_estimators
 from quadest.estimators.srukf import SRUKF
-from quadest.testing import Quadratic, check_estimator, check_sigma_point_moments, quadratic_moments
 
 UT_GRID = [{"alpha": a, "beta": b, "kappa": k} for a, b, k in product((1e-3, 0.5, 1.0), (0.0, 2.0), (0.0, 1.0))]
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from quadest.conformance import check_estimator, linear_gaussian_problem
 from quadest.errors import ConfigError
 from quadest.estimators.error_state_ekf import ErrorStateEKF
 from quadest.estimators.gaussian_filter import GaussianFilter
@@ -27,7 +28,6 @@ from quadest.estimators.smoother_settings import smoother_settings
 from quadest.estimators.smoothing import rts_backward
 from quadest.models.base import FilterModel
 from quadest.models.book_pendulum import BookPendulumModel
-from quadest.testing import check_estimator, linear_gaussian_problem
 
 EPS = np.finfo(float).eps
 

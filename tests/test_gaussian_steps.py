@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
+from quadest.conformance import linear_gaussian_problem
 from quadest.estimators.gaussian_steps import (
     covariance_posterior,
     joseph_covariance,
@@ -35,7 +36,6 @@ from quadest.numerics.rules import (
     GaussHermiteRule,
     UnscentedRule,
 )
-from quadest.testing import linear_gaussian_problem
 
 N, M = 5, 2  # state and measurement dimensions: the state is partially observed
 BATCH = (3, 4)  # runs × particles

@@ -8,13 +8,13 @@ import pytest
 from filterpy.kalman import KalmanFilter
 from scipy.stats import multivariate_normal
 
+from quadest.conformance import linear_gaussian_problem
 from quadest.errors import ConfigError
 from quadest.estimators.particle import BootstrapPF, weighted_moments
 from quadest.estimators.particle_ekpf import EKPF
 from quadest.estimators.particle_ilopf import ILOPF
 from quadest.estimators.particle_upf import UPF
 from quadest.models.functional import LinearGaussianModel
-from quadest.testing import linear_gaussian_problem
 
 FILTERS = [BootstrapPF, EKPF, ILOPF, UPF]
 

@@ -18,6 +18,7 @@ import sys
 import numpy as np
 import pytest
 
+from quadest.conformance import linear_gaussian_problem
 from quadest.estimators.particle import BootstrapPF, gather_particles
 from quadest.estimators.particle_ekpf import EKPF
 from quadest.estimators.particle_ilopf import ILOPF
@@ -36,7 +37,6 @@ from quadest.numerics.resampling import (
     resample,
     resample_from_uniforms,
 )
-from quadest.testing import linear_gaussian_problem
 
 
 def generators(seeds) -> list[np.random.Generator]:

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from quadest.conformance import check_estimator
 from quadest.estimators.iterated import IEKF
 from quadest.models.book_pendulum import BookPendulumModel
-from quadest.testing import check_estimator
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "plugins"))

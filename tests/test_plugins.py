@@ -16,6 +16,7 @@ import pytest
 
 from helpers import compose_config, compose_settings, random_spd, run_filter, simulate, smooth_model
 from quadest.app.job import run_job
+from quadest.conformance import check_estimator, linear_gaussian_problem
 from quadest.estimators.base import PerRunAdapter
 from quadest.estimators.cubature import CKF
 from quadest.estimators.filterpy_ukf import FilterpyUKF
@@ -24,7 +25,6 @@ from quadest.estimators.registry import EstimatorSpec, builtin_estimators, make_
 from quadest.models.attitude import AttitudeFilterModel
 from quadest.models.base import FilterModel
 from quadest.simulation.quadrotor_data import build_quadrotor_data
-from quadest.testing import check_estimator, linear_gaussian_problem
 from target_plugin import Crashes, LinearizedKF
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -248,7 +248,7 @@ def test_external_package_runs_a_comparison(installed_example, tmp_path):
 
 def test_external_package_passes_conformance(installed_example, tmp_path):
     code = (
-        "from quadest.testing import check_estimator\n"
+        "from quadest.conformance import check_estimator\n"
         "from quadest_iekf.filter import IteratedEKF\n"
         "check_estimator(IteratedEKF, bad_params=[{'iterations': 0}])\n"
     )

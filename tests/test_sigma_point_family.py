@@ -19,6 +19,7 @@ from filterpy.kalman import KalmanFilter
 from helpers import compose_config, random_spd, run_filter, simulate, smooth_model
 from quadest.app.job import run_job
 from quadest.app.settings import data_settings
+from quadest.conformance import check_estimator
 from quadest.estimators.central_difference import CDKF, SRCDKF
 from quadest.estimators.cubature import CKF, CKF5, SRCKF, SRCKF5
 from quadest.estimators.divided_difference import DD1
@@ -28,7 +29,6 @@ from quadest.estimators.srukf import SRUKF
 from quadest.models.functional import FunctionalModel
 from quadest.numerics import rules
 from quadest.simulation.registry import build_data
-from quadest.testing import check_estimator
 
 FAMILY = [
     (SRUKF, {"alpha": 0.5}, [{"alpha": -1.0}, {"kappa": -10.0}]),

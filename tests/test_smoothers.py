@@ -20,6 +20,7 @@ import pytest
 from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from helpers import simulate, smooth_model
+from quadest.conformance import linear_gaussian_problem
 from quadest.estimators.error_state_ekf import ErrorStateEKF
 from quadest.estimators.extended import HuberEKF
 from quadest.estimators.filterpy_ekf import BatchedFilterpyEKF
@@ -39,7 +40,6 @@ from quadest.numerics.rules import (
     GaussHermiteRule,
     UnscentedRule,
 )
-from quadest.testing import linear_gaussian_problem
 
 RULES = {
     "ut": UnscentedRule(0.5, 2.0, 0.0),

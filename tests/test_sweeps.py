@@ -27,11 +27,11 @@ from quadest.app.cli import one_way
 from quadest.app.schema import register_schemas
 from quadest.app.settings import data_settings
 from quadest.app.validate import validate
+from quadest.conformance import check_sigma_point_moments
 from quadest.estimators.registry import resolve
 from quadest.models.quadrotor_config import triad_spec
 from quadest.montecarlo.streams import run_seed_sequences, run_streams
 from quadest.simulation.registry import build_data
-from quadest.testing import check_sigma_point_moments
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENTS = ROOT / "experiments"
@@ -99,7 +99,7 @@ def sweep_cells(name: str) -> list[dict[str, str]]:
 
 
 UT_KEYS = ("sweep.alpha", "sweep.beta", "sweep.kappa")
-PROBE_N = 4  # state dimension of quadest.testing's quadratic probe
+PROBE_N = 4  # state dimension of quadest.conformance's quadratic probe
 
 
 def _names_sweep_key(node, field: str, key: str) -> bool:
@@ -110,7 +110,7 @@ def _names_sweep_key(node, field: str, key: str) -> bool:
 def check_ut_keys(name: str, cell: dict[str, str], cfg) -> None:
     """Every selected estimator that takes its UT parameters from the sweep (``${sweep.alpha}``
     ...) receives the cell's (α, β, κ) and behaves as that UT on the quadratic probe of
-    ``quadest.testing`` (its weights W0(c) hold β); at least one does. A UT filter that keeps its
+    ``quadest.conformance`` (its weights W0(c) hold β); at least one does. A UT filter that keeps its
     own parameters (a baseline run once per sensor level, ``sweep_ut_grid``'s UKF) is not swept.
     The probe has n = 4, so a κ ≤ −4 (the UT grid's −6 for its n = 9 model) is checked by value only."""
     swept = tuple(float(cell[k]) for k in UT_KEYS)

@@ -1802,6 +1802,40 @@ MUTATIONS += (  # one registry behaviour for every extension kind (src/quadest/c
     ),
 )
 
+SENSOR_KIT = "tests/test_conformance_sensors.py::test_a_broken_sensor_fails_on_its_bug"
+MODEL_KIT = "tests/test_conformance_models.py::test_a_broken_model_fails_on_its_bug"
+
+MUTATIONS += (  # the conformance kit's own checks (quadest.conformance.check_sensor, check_model)
+    Mutation(
+        "the conformance kit's Jacobian tolerance ignored",
+        "src/quadest/conformance/jacobians.py",
+        "tol = jacobian_tolerance(values, differences, step, largest_step)",
+        "tol = np.inf",
+        (SENSOR_KIT + "[WrongJacobian]", MODEL_KIT + "[WrongJacobian]"),
+    ),
+    Mutation(
+        "check_sensor blind to draws from numpy's global generator",
+        "src/quadest/conformance/sensors.py",
+        "    after = np.random.get_state()",
+        "    after = state",
+        (SENSOR_KIT + "[GlobalDraws]",),
+    ),
+    Mutation(
+        "check_sensor comparing only run 0 of a batch with the run alone",
+        "src/quadest/conformance/sensors.py",
+        "for i in range(runs):",
+        "for i in range(1):",
+        (SENSOR_KIT + "[OneGenerator]",),
+    ),
+    Mutation(
+        "check_model never restricting the batch",
+        "src/quadest/conformance/models.py",
+        "for runs in [*range(B), slice(1, None)]:",
+        "for runs in []:",
+        (MODEL_KIT + "[ForgetsItsDrift]", MODEL_KIT + "[NextRun]"),
+    ),
+)  # fmt: skip
+
 
 def tree_files() -> list[str]:
     """Tracked files that still exist, plus untracked files that are not ignored."""

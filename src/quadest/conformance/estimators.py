@@ -2,7 +2,7 @@
 
 A plugin author runs, in their own test suite::
 
-    from quadest.testing import check_estimator, check_sigma_point_moments
+    from quadest.conformance import check_estimator, check_sigma_point_moments
     check_estimator(MyFilter, params={"alpha": 0.5}, bad_params=[{"alpha": -1.0}])
     check_sigma_point_moments(MyFilter, params={"alpha": 0.5, "beta": 2.0, "kappa": 0.0})
 
