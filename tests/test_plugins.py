@@ -229,12 +229,12 @@ def test_external_package_runs_a_comparison(installed_example, tmp_path):
     out = tmp_path / "run"
     proc = quadest(
         [
-            "estimator=[srukf,iekf]",
+            "estimator=[srukf,single_run_iekf]",
             "runs=2",
             "duration=0.5",
             "progress=false",
             "output.figures=false",
-            "estimator.iekf.iterations=2",
+            "estimator.single_run_iekf.iterations=2",
             f"hydra.run.dir={out}",
         ],
         tmp_path,
@@ -242,7 +242,7 @@ def test_external_package_runs_a_comparison(installed_example, tmp_path):
     )
     assert proc.returncode == 0, proc.stderr
     table = pd.read_csv(out / "metrics.csv")
-    assert set(table["estimator"]) == {"srukf", "iekf"}
+    assert set(table["estimator"]) == {"srukf", "single_run_iekf"}
     assert not table["diverged"].any()
 
 

@@ -18,7 +18,7 @@ from quadest.estimators import SingleRunEstimator
 
 @dataclass
 class IEKFParams:
-    kind: str = "iekf"
+    kind: str = "single_run_iekf"
     iterations: int = 3
 
 
@@ -31,7 +31,7 @@ class IteratedEKF(SingleRunEstimator):
     def __init__(self, model, iterations: int = 3) -> None:
         super().__init__(model)
         if not (isinstance(iterations, int) and iterations >= 1):
-            raise ValueError(f"iekf: iterations must be an integer >= 1, got {iterations!r}")
+            raise ValueError(f"single_run_iekf: iterations must be an integer >= 1, got {iterations!r}")
         self.iterations = iterations
 
     def initialize(self, x0: np.ndarray, P0: np.ndarray) -> None:
