@@ -139,7 +139,7 @@ def with_efficiency(row: dict, metrics: pd.DataFrame) -> dict:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=8, help="paired rounds per pair (default 8)")
+    parser.add_argument("--repeats", type=int, default=20, help="paired rounds per pair (default 20)")
     parser.add_argument("--out", type=Path, default=OUT, help="folder of step_time_ratios.csv (results/timing_claims)")
     parser.add_argument("--quick", action="store_true", help="toy sizes, two rounds, nothing written (tests)")
     args = parser.parse_args()
