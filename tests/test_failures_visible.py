@@ -194,7 +194,8 @@ def test_a_truncated_log_replays_with_a_warning(capsys, tmp_path):
     validate(compose_config(["experiment=px4_replay", f"source.path={path}", "duration=20"]))
     err = capsys.readouterr().err
     assert f"quadest: warning: {path} ends in" in err and "truncated" in err
-    assert "holds 34.076 s of IMU and attitude data, of which 20.000 s are replayed" in err  # the window replayed, not the whole truncated log
+    # the window replayed, not the whole truncated log
+    assert "holds 34.076 s of IMU and attitude data, of which 20.000 s are replayed" in err
 
 
 def test_an_estimator_labelled_px4_is_refused_in_a_replay():
