@@ -59,7 +59,9 @@ def test_band_shares_use_the_error_dimension_for_nees_and_the_measurement_dimens
     """The shares in the summary entry equal the shares of scipy's χ² quantiles with d = the
     model's error dimension (NEES) and its primary measurement dimension (NIS; a model without a
     primary measurement has no NIS and no share)."""
-    data = build_data(compose_settings([f"model={model}", f"runs={RUNS}", "duration=0.3", "progress=false"]))
+    data = build_data(
+        compose_settings([f"model={model}", f"runs={RUNS}", "duration=0.3", "sample_period=0.01", "progress=false"])
+    )
     n, m = data.model.n_err, data.model.m
     K1 = data.time.size
     alive_t = np.resize([RUNS, RUNS, 2, 1, 0], K1).astype(float)  # runs dropping out, a step with none alive
@@ -87,6 +89,8 @@ def test_the_family_has_models_whose_dimensions_differ():
     """The property above has teeth only where n ≠ m: the registered family has such models."""
     dims = {}
     for model in MODELS:
-        data = build_data(compose_settings([f"model={model}", "runs=1", "duration=0.05", "progress=false"]))
+        data = build_data(
+            compose_settings([f"model={model}", "runs=1", "duration=0.05", "sample_period=0.01", "progress=false"])
+        )
         dims[model] = (data.model.n_err, data.model.m)
     assert any(m and n != m for n, m in dims.values()), dims

@@ -103,7 +103,7 @@ def check_sensor(
     assert available.any(), f"{name}: no sample available in {K1} steps"
     assert np.isfinite(values[:, available]).all(), f"{name}: a value is not finite where a sample is available"
     if hasattr(settings, "rate"):
-        grid = available_samples(float(settings.rate), float(job.sample_period), K1)
+        grid = available_samples(float(settings.rate), float(job.sample_period), K1, f"{cls.key()}.rate")
         assert not (available & ~grid).any(), f"{name}: a sample off the grid of rate={settings.rate} Hz"
 
     _check_streams(name, cls, settings, context, data, record, seed)
