@@ -78,32 +78,33 @@ def pairs(quick: bool) -> list[Pair]:
     ]
 
 
-def keep_only(labels: tuple[str, ...], overrides: tuple[str, ...]) -> list[str]:
-    """Overrides that leave only ``labels`` of an experiment's estimators (``~estimator.X`` for the rest)."""
+def alone(label: str, overrides: tuple[str, ...]) -> quadest.ValidatedConfig:
+    """The config of ``overrides`` with only the estimator ``label`` (``~estimator.X`` for the
+    experiment's others), one worker, the result cache off."""
     config = quadest.compose([*overrides, "workers=1"])
-    return [*overrides, *(f"~estimator.{e}" for e in config.settings.experiment.estimator if e not in labels)]
+    others = [f"~estimator.{e}" for e in config.settings.experiment.estimator if e != label]
+    return quadest.compose([*overrides, *others, "workers=1", "cache.enabled=false"])
 
 
-def step_time(overrides: list[str], label: str, data) -> float:
-    """µs per step and run of ``label`` alone on ``data``, computed (cache off) in this process."""
-    config = quadest.compose(keep_only((label,), tuple(overrides)) + ["workers=1", "cache.enabled=false"])
+def step_time(config: quadest.ValidatedConfig, data) -> float:
+    """µs per step and run of the one estimator of ``config`` on ``data``, computed in this process."""
     (result,) = quadest.run_estimators(config, data)
     if result.diverged.all():
-        raise RuntimeError(f"{label} failed in every run: {sorted(set(result.reasons.values()))}")
+        raise RuntimeError(f"{result.name} failed in every run: {sorted(set(result.reasons.values()))}")
     return float(result.step_time_us)
 
 
 def time_pair(pair: Pair, repeats: int) -> dict:
     """Paired timings of ``pair`` over ``repeats`` rounds, the order alternating."""
-    overrides = list(pair.overrides)
-    data = quadest.make_data(quadest.compose(keep_only((pair.reference,), pair.overrides) + ["workers=1"]))
-    for label in (pair.estimator, pair.reference):  # untimed: kernels loaded, caches warm
-        step_time(overrides, label, data)
+    configs = {label: alone(label, pair.overrides) for label in (pair.estimator, pair.reference)}
+    data = quadest.make_data(configs[pair.reference])
+    for config in configs.values():  # untimed: kernels loaded, caches warm
+        step_time(config, data)
     load_before = os.getloadavg()[0]
     est, ref = [], []
     for r in range(repeats):
         order = (pair.estimator, pair.reference) if r % 2 == 0 else (pair.reference, pair.estimator)
-        times = {label: step_time(overrides, label, data) for label in order}
+        times = {label: step_time(configs[label], data) for label in order}
         est.append(times[pair.estimator])
         ref.append(times[pair.reference])
     load_after = os.getloadavg()[0]

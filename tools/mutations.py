@@ -1517,7 +1517,7 @@ MUTATIONS += (  # behaviours that once passed every test covering their code (te
     Mutation(
         "the reentry bearing residual not wrapped",
         "src/quadest/models/reentry.py",
-        "wrap_bearing(r[..., 1:])",
+        "wrap_angle(r[..., 1:])",
         "r[..., 1:]",
         ("tests/test_reentry.py::test_the_bearing_residual_is_wrapped",
          "tests/test_reentry.py::test_an_update_across_the_bearings_cut_moves_the_estimate_by_a_bearing_noise_only"),
@@ -1621,9 +1621,9 @@ MUTATIONS += (  # the toolbox manual's bearings-only tracking (docs/toolbox-bot.
     ),
     Mutation(
         "model=bearings_only's Wiener velocity Q without its position-velocity terms",
-        "src/quadest/models/bearings_only.py",
-        "block = float(q) * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])",
-        "block = float(q) * np.array([[dt**3 / 3.0, 0.0], [0.0, dt]])",
+        "src/quadest/models/wiener_velocity.py",
+        "return float(q) * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])",
+        "return float(q) * np.array([[dt**3 / 3.0, 0.0], [0.0, dt]])",
         (TOOLBOX_BOT + "test_the_ekf_and_its_rts_smoother_equal_an_independent_implementation",),
     ),
 )  # fmt: skip

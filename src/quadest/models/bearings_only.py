@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quadest.models.base import FilterModel
+from quadest.models.wiener_velocity import constant_velocity_plane
 from quadest.quadrotor.kinematics import wrap_angle
 
 
@@ -67,12 +68,7 @@ class BearingsOnlyModel(FilterModel):
         self.sensors_xy = np.asarray(sensors, dtype=float).reshape(-1, 2)
         self.m = self.sensors_xy.shape[0]
         self.measurement_names = tuple(f"bearing_{i + 1}" for i in range(self.m))
-        self.A = np.eye(4)
-        self.A[0, 2] = self.A[1, 3] = self.dt
-        block = float(q) * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
-        self.Q = np.zeros((4, 4))
-        self.Q[np.ix_([0, 2], [0, 2])] = block
-        self.Q[np.ix_([1, 3], [1, 3])] = block
+        self.A, self.Q = constant_velocity_plane(q, self.dt)
         self.R = float(bearing_std) ** 2 * np.eye(self.m)
 
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadest.models.base import FilterModel
+from quadest.models.wiener_velocity import wiener_velocity_block
 
 
 class BookPendulumModel(FilterModel):
@@ -24,7 +25,7 @@ class BookPendulumModel(FilterModel):
 
     def __init__(self, dt: float, g: float, q_c: float, R: float, batch_size: int) -> None:
         self.dt, self.g, self.batch_size = float(dt), float(g), int(batch_size)
-        self.Q = float(q_c) * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+        self.Q = wiener_velocity_block(q_c, dt)
         self.R = np.array([[float(R)]])
 
     def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ state-space noise covariance ``Q = L Qc Lᵀ Δt`` has rank 3 of 5. A radar at `
 
     r = √((x1 − sx)² + (x2 − sy)²) + q1,   θ = atan2(x2 − sy, x1 − sx) + q2,
 
-with ``q ~ N(0, diag(σr², σθ²))``; the bearing's residual is wrapped to [−π, π).
+with ``q ~ N(0, diag(σr², σθ²))``; the bearing's residual is wrapped to (−π, π].
 
 Jacobians (analytic; the manual's printed ones carry misprints — ``∂β/∂x5 = β/R`` for ``β`` and
 ``∂r/∂x1 = x1/r`` for ``(x1 − sx)/r`` — so these are derived afresh and held to central
@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from quadest.models.base import FilterModel
+from quadest.quadrotor.kinematics import wrap_angle
 
 NOISE_INPUT = np.vstack([np.zeros((2, 3)), np.eye(3)])
 """``L``: the three process-noise inputs enter the two velocities and the ballistic parameter."""
@@ -67,11 +68,6 @@ class ReentryModelConf:
     x0_var: list[float] = field(default_factory=lambda: [1.0e-6, 1.0e-6, 1.0e-6, 1.0e-6, 0.0])
     m0: list[float] = field(default_factory=lambda: [6500.4, 349.14, -1.8093, -6.7967, 0.0])
     P0: list[float] = field(default_factory=lambda: [1.0e-6, 1.0e-6, 1.0e-6, 1.0e-6, 1.0])
-
-
-def wrap_bearing(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped to [−π, π)."""
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 class ReentryModel(FilterModel):
@@ -138,9 +134,9 @@ class ReentryModel(FilterModel):
         return np.stack([np.hypot(dx, dy), np.arctan2(dy, dx)], axis=-1)
 
     def measurement_residual(self, z: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-        """``z − ẑ`` with the bearing's difference wrapped to [−π, π)."""
+        """``z − ẑ`` with the bearing's difference wrapped to (−π, π]."""
         r = z - predicted
-        return np.concatenate([r[..., :1], wrap_bearing(r[..., 1:])], axis=-1)
+        return np.concatenate([r[..., :1], wrap_angle(r[..., 1:])], axis=-1)
 
     def F_analytic(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         R, V, drag_per_speed, D, G = self._forces(x)

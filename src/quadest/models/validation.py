@@ -25,6 +25,7 @@ import numpy as np
 from quadest.config.settings import DataSettings
 from quadest.models.base import FilterModel
 from quadest.models.functional import LinearGaussianModel
+from quadest.models.wiener_velocity import constant_velocity_plane
 from quadest.numerics.square_root import kernel_backend
 
 
@@ -41,14 +42,8 @@ def _kernels() -> ModuleType | None:
 def constant_velocity_model(settings: DataSettings, runs: int) -> LinearGaussianModel:
     """The ``linear`` model from its ``model`` settings and ``sample_period``."""
     T, m = float(settings.sample_period), settings.model
-    A = np.eye(4)
-    A[0, 2] = A[1, 3] = T
+    A, Q = constant_velocity_plane(float(m.acceleration_psd), T)
     C = np.eye(2, 4)
-    q = float(m.acceleration_psd)
-    block = q * np.array([[T**3 / 3.0, T**2 / 2.0], [T**2 / 2.0, T]])
-    Q = np.zeros((4, 4))
-    Q[np.ix_([0, 2], [0, 2])] = block
-    Q[np.ix_([1, 3], [1, 3])] = block
     s, rho = float(m.position_noise_std), float(m.measurement_correlation)
     R = s**2 * np.array([[1.0, rho], [rho, 1.0]])
     return LinearGaussianModel(
